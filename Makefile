@@ -1,0 +1,46 @@
+# bagtools: `make demo` sets up and runs the main job; `make test` sets up and runs the tests.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+BAGTOOLS := $(VENV)/bin/bagtools
+OUT    ?= out
+
+.PHONY: setup sysdeps demo test bench fixtures clean
+
+# System library Open3D loads at import time (libusb-1.0). Installed with apt-get when
+# we may; otherwise the one command that does it is printed and setup stops.
+sysdeps:
+	@if ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  echo "installing libusb-1.0-0 (needed by Open3D)"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	elif command -v sudo >/dev/null && command -v apt-get >/dev/null && sudo -n true 2>/dev/null; then \
+	  sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	else \
+	  echo "Open3D needs libusb-1.0. Install it with: sudo apt-get install libusb-1.0-0  (macOS: brew install libusb)"; exit 2; \
+	fi
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+setup: sysdeps $(VENV)/.installed
+
+demo: setup
+	$(BAGTOOLS) simulate $(OUT)/turtlebot3_sim --force
+	$(BAGTOOLS) info $(OUT)/turtlebot3_sim
+	@echo "demo outputs are under $(OUT)/"
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	$(PY) -m bench
+
+fixtures: setup
+	$(PY) -m fixtures.generate
+
+clean:
+	rm -rf $(VENV) $(OUT) build *.egg-info

@@ -1,0 +1,3 @@
+from bagtools.cli import main
+
+main()
