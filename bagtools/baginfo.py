@@ -1,0 +1,118 @@
+"""What a bag holds: topics (type, count, frequency), time span and the tf tree.
+
+``describe_bag`` reads the bag once: every message's bag time is counted per
+topic without decoding, and only /tf and /tf_static are decoded for the tree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from bagtools.io import TfCollector, open_bag
+from bagtools.progress import progress
+from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
+
+
+@dataclass(frozen=True)
+class TopicSummary:
+    """One topic: message type, count and mean frequency over its bag times."""
+
+    name: str
+    msgtype: str
+    count: int
+    frequency_hz: float
+    first_ns: int
+    last_ns: int
+
+
+@dataclass(frozen=True)
+class BagDescription:
+    """Everything ``bagtools info`` reports about one bag."""
+
+    path: str
+    kind: str
+    start_ns: int
+    end_ns: int
+    message_count: int
+    topics: list[TopicSummary]
+    frames: list[FrameInfo]
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / 1e9
+
+    def to_json(self) -> dict:
+        """The description as JSON-able data (times in int ns and float s)."""
+        return {
+            "path": self.path,
+            "kind": self.kind,
+            "start_ns": self.start_ns,
+            "end_ns": self.end_ns,
+            "start_iso": _iso(self.start_ns),
+            "end_iso": _iso(self.end_ns),
+            "duration_s": self.duration_s,
+            "message_count": self.message_count,
+            "topics": [t.__dict__ for t in self.topics],
+            "tf_frames": [f.to_dict() for f in self.frames],
+            "warnings": self.warnings,
+        }
+
+
+def _iso(stamp_ns: int) -> str:
+    return datetime.fromtimestamp(stamp_ns / 1e9, tz=UTC).isoformat(timespec="milliseconds")
+
+
+def describe_bag(path: str | Path) -> BagDescription:
+    """Read the bag at ``path`` once and describe it (raises :class:`~bagtools.errors.BagError`)."""
+    with open_bag(path) as bag:
+        collector = TfCollector()
+        collector.check(bag)
+        times: dict[str, list[int]] = {name: [] for name in bag.topics}
+        for raw in progress(bag.raw_messages(), total=bag.message_count, desc="reading"):
+            times[raw.topic].append(raw.log_time_ns)
+            if raw.topic in collector.topics:
+                collector.add(bag.deserialize(raw))
+        topics = []
+        for name, info in bag.topics.items():
+            stamps = np.asarray(times[name], dtype=np.int64)
+            span_s = (stamps.max() - stamps.min()) / 1e9 if stamps.size else 0.0
+            freq = (stamps.size - 1) / span_s if stamps.size > 1 and span_s > 0 else 0.0
+            topics.append(TopicSummary(name, info.msgtype, int(stamps.size), float(freq),
+                                       int(stamps.min()) if stamps.size else 0, int(stamps.max()) if stamps.size else 0))
+        return BagDescription(str(bag.path), bag.kind, bag.start_ns, bag.end_ns, sum(t.count for t in topics),
+                              topics, frame_infos(*collector.arrays()), list(bag.warnings))
+
+
+def format_description(desc: BagDescription) -> str:
+    """Human-readable text for ``bagtools info``."""
+    lines = [
+        f"path:       {desc.path}",
+        f"format:     {desc.kind}",
+        f"duration:   {desc.duration_s:.3f} s",
+        f"start:      {_iso(desc.start_ns)} ({desc.start_ns / 1e9:.3f})",
+        f"end:        {_iso(desc.end_ns)} ({desc.end_ns / 1e9:.3f})",
+        f"messages:   {desc.message_count}",
+        "",
+    ]
+    width = max((len(t.name) for t in desc.topics), default=5)
+    type_width = max((len(t.msgtype) for t in desc.topics), default=4)
+    lines.append(f"{'topic'.ljust(width)}  {'type'.ljust(type_width)}  {'count':>7}  {'freq (Hz)':>9}")
+    for t in desc.topics:
+        lines.append(f"{t.name.ljust(width)}  {t.msgtype.ljust(type_width)}  {t.count:>7}  {t.frequency_hz:>9.2f}")
+    lines.append("")
+    if desc.frames:
+        # Header stamps may be on another clock than bag time (simulation time),
+        # so the tree's times are relative to the first tf stamp.
+        dynamic_firsts = [f.first_ns for f in desc.frames if not f.is_static]
+        origin_ns = min(dynamic_firsts) if dynamic_firsts else None
+        origin = f"relative to the first tf stamp, {origin_ns / 1e9:.3f} s" if origin_ns is not None else "all static"
+        lines.append(f"tf tree ({origin}):")
+        lines.append(render_tree(desc.frames, origin_ns=origin_ns))
+    else:
+        lines.append("tf tree: no /tf or /tf_static data")
+    return "\n".join(lines)

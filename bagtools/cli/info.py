@@ -1,0 +1,28 @@
+"""``bagtools info``: topics, time span and tf tree of a bag."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+
+@click.command()
+@click.argument("bag", type=click.Path(path_type=str))
+@click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
+def info(bag: str, as_json: bool) -> None:
+    """Describe BAG: topics (type, count, frequency), duration and the tf tree.
+
+    BAG is a rosbag2 directory, a .mcap or .db3 file, or a ROS 1 .bag.
+
+    \b
+    Example:
+      bagtools info out/turtlebot3_sim
+      bagtools info recording.mcap --json > info.json
+    """
+    from bagtools.baginfo import describe_bag, format_description
+
+    desc = describe_bag(bag)
+    for warning in desc.warnings:
+        click.echo(f"bagtools: warning: {warning}", err=True)
+    click.echo(json.dumps(desc.to_json(), indent=2) if as_json else format_description(desc))

@@ -1,0 +1,227 @@
+"""Decoders from rosbags message objects to numpy arrays.
+
+Each decoder takes one deserialized message (ROS 1 or ROS 2: rosbags gives both
+the same field names) and returns a small frozen dataclass of arrays. Stamps are
+int nanoseconds; quaternions are in ROS order x, y, z, w.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bagtools.errors import BagtoolsError
+
+LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
+POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
+ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
+
+# sensor_msgs/PointField datatypes -> numpy scalar kinds (byte order added later).
+_POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+
+class DecodeError(BagtoolsError):
+    """A message cannot be decoded (e.g. a PointCloud2 without x, y, z fields)."""
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time (sec, nanosec) -> int nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+@dataclass(frozen=True)
+class LaserScanArrays:
+    """A LaserScan as arrays, in the scan's own frame.
+
+    ``ranges_m`` (N,) float32 as recorded (inf/NaN kept); ``angles_rad`` (N,)
+    float64, beam i at angle_min + i * angle_increment; ``valid`` (N,) bool:
+    finite and within [range_min_m, range_max_m].
+    """
+
+    stamp_ns: int
+    frame_id: str
+    ranges_m: np.ndarray
+    angles_rad: np.ndarray
+    range_min_m: float
+    range_max_m: float
+    intensities: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        r = self.ranges_m
+        return np.isfinite(r) & (r >= self.range_min_m) & (r <= self.range_max_m)
+
+    def points_xy(self) -> np.ndarray:
+        """(M,2) float64 x, y of the valid returns in the scan frame, metres."""
+        keep = self.valid
+        r = self.ranges_m[keep].astype(np.float64)
+        a = self.angles_rad[keep]
+        return np.column_stack((r * np.cos(a), r * np.sin(a)))
+
+
+def decode_laserscan(msg: Any) -> LaserScanArrays:
+    """sensor_msgs/LaserScan -> :class:`LaserScanArrays` (ranges are not copied)."""
+    ranges = np.asarray(msg.ranges, dtype=np.float32)
+    angles = float(msg.angle_min) + np.arange(ranges.size) * float(msg.angle_increment)
+    return LaserScanArrays(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        frame_id=msg.header.frame_id,
+        ranges_m=ranges,
+        angles_rad=angles,
+        range_min_m=float(msg.range_min),
+        range_max_m=float(msg.range_max),
+        intensities=np.asarray(msg.intensities, dtype=np.float32),
+    )
+
+
+@dataclass(frozen=True)
+class CloudArrays:
+    """A PointCloud2's finite x, y, z points: ``points`` (N,3) float32 in ``frame_id``."""
+
+    stamp_ns: int
+    frame_id: str
+    points: np.ndarray
+
+
+def _xyz_view(msg: Any) -> np.ndarray:
+    """(height*width, 3) view (or copy when the layout demands it) of x, y, z."""
+    fields = {f.name: f for f in msg.fields}
+    missing = [n for n in "xyz" if n not in fields]
+    if missing:
+        raise DecodeError(f"PointCloud2 has no field(s) {', '.join(missing)} (fields: {', '.join(fields) or 'none'})")
+    order = ">" if msg.is_bigendian else "<"
+    kinds = []
+    for name in "xyz":
+        kind = _POINTFIELD_DTYPES.get(int(fields[name].datatype))
+        if kind is None:
+            raise DecodeError(f"PointCloud2 field {name} has unknown datatype {fields[name].datatype}")
+        kinds.append(kind)
+    height, width, point_step, row_step = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
+    n_points = height * width
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if n_points == 0:
+        return np.empty((0, 3), dtype=np.float32)
+    if point_step <= 0 or row_step < width * point_step or data.size < (height - 1) * row_step + width * point_step:
+        raise DecodeError(
+            f"PointCloud2 layout is inconsistent: {height}x{width} points, point_step {point_step}, "
+            f"row_step {row_step}, {data.size} data bytes"
+        )
+    if row_step != width * point_step:  # padded rows: drop the padding, row by row in one reshape
+        data = data[: height * row_step].reshape(height, row_step)[:, : width * point_step].reshape(-1)
+    offsets = [int(fields[n].offset) for n in "xyz"]
+    if kinds[0] == kinds[1] == kinds[2] and offsets == [offsets[0], offsets[0] + int(kinds[0][1:]), offsets[0] + 2 * int(kinds[0][1:])]:
+        dtype = np.dtype({"names": ["xyz"], "formats": [(order + kinds[0], 3)], "offsets": [offsets[0]], "itemsize": point_step})
+        return np.frombuffer(data, dtype=dtype, count=n_points)["xyz"]
+    dtype = np.dtype({"names": list("xyz"), "formats": [order + k for k in kinds], "offsets": offsets, "itemsize": point_step})
+    structured = np.frombuffer(data, dtype=dtype, count=n_points)
+    return np.column_stack([structured[n] for n in "xyz"])
+
+
+def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
+    """sensor_msgs/PointCloud2 -> :class:`CloudArrays` with (N,3) float32 points.
+
+    Honours ``fields`` (x, y, z at any offsets and numeric types), ``point_step``,
+    ``row_step`` padding and ``is_bigendian``. Points with a non-finite coordinate
+    are dropped unless ``keep_nan`` (then the result is height*width points).
+    """
+    xyz = _xyz_view(msg)
+    if not keep_nan:
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, np.asarray(xyz, dtype=np.float32))
+
+
+@dataclass(frozen=True)
+class OdometrySample:
+    """A nav_msgs/Odometry: pose of ``child_frame_id`` in ``frame_id``, twist in the child frame.
+
+    ``position_m`` (3,), ``orientation_xyzw`` (4,) ROS order, ``linear_mps`` (3,),
+    ``angular_radps`` (3,), covariances (6,6) row-major as in the message.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    child_frame_id: str
+    position_m: np.ndarray
+    orientation_xyzw: np.ndarray
+    linear_mps: np.ndarray
+    angular_radps: np.ndarray
+    pose_covariance: np.ndarray
+    twist_covariance: np.ndarray
+
+
+def decode_odometry(msg: Any) -> OdometrySample:
+    """nav_msgs/Odometry -> :class:`OdometrySample`."""
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    v, w = msg.twist.twist.linear, msg.twist.twist.angular
+    return OdometrySample(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        frame_id=msg.header.frame_id,
+        child_frame_id=msg.child_frame_id,
+        position_m=np.array([p.x, p.y, p.z]),
+        orientation_xyzw=np.array([q.x, q.y, q.z, q.w]),
+        linear_mps=np.array([v.x, v.y, v.z]),
+        angular_radps=np.array([w.x, w.y, w.z]),
+        pose_covariance=np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6),
+        twist_covariance=np.asarray(msg.twist.covariance, dtype=np.float64).reshape(6, 6),
+    )
+
+
+@dataclass(frozen=True)
+class TfArrays:
+    """Transforms as parallel arrays: the pose of ``child[i]`` in ``parent[i]`` at ``stamp_ns[i]``.
+
+    ``parent``/``child`` (N,) str (frame ids exactly as recorded); ``stamp_ns``
+    (N,) int64; ``translation`` (N,3) float64 metres; ``rotation_xyzw`` (N,4)
+    float64 in ROS order x, y, z, w.
+    """
+
+    parent: np.ndarray
+    child: np.ndarray
+    stamp_ns: np.ndarray
+    translation: np.ndarray
+    rotation_xyzw: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.stamp_ns.size)
+
+    @staticmethod
+    def empty() -> TfArrays:
+        return TfArrays(
+            np.empty(0, dtype=object), np.empty(0, dtype=object), np.empty(0, dtype=np.int64),
+            np.empty((0, 3)), np.empty((0, 4)),
+        )
+
+    @staticmethod
+    def concatenate(parts: Iterable[TfArrays]) -> TfArrays:
+        """Join several TfArrays end to end."""
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return TfArrays.empty()
+        return TfArrays(
+            np.concatenate([p.parent for p in parts]),
+            np.concatenate([p.child for p in parts]),
+            np.concatenate([p.stamp_ns for p in parts]),
+            np.concatenate([p.translation for p in parts]),
+            np.concatenate([p.rotation_xyzw for p in parts]),
+        )
+
+
+def decode_tf_message(msg: Any) -> TfArrays:
+    """tf2_msgs/TFMessage (ROS 2) or tf/tfMessage (ROS 1) -> :class:`TfArrays`."""
+    transforms = msg.transforms
+    n = len(transforms)
+    parent = np.empty(n, dtype=object)
+    child = np.empty(n, dtype=object)
+    stamps = np.empty(n, dtype=np.int64)
+    values = np.empty((n, 7))
+    for i, ts in enumerate(transforms):
+        parent[i] = ts.header.frame_id
+        child[i] = ts.child_frame_id
+        stamps[i] = stamp_to_ns(ts.header.stamp)
+        t, q = ts.transform.translation, ts.transform.rotation
+        values[i] = (t.x, t.y, t.z, q.x, q.y, q.z, q.w)
+    return TfArrays(parent, child, stamps, values[:, :3], values[:, 3:])

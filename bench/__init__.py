@@ -1,0 +1,1 @@
+"""Benchmarks: each ``bench/bench_<area>.py`` defines ``run(quick: bool) -> list[Row]``."""
