@@ -83,7 +83,7 @@ class _AnySource:
         self.reader.open()
         self.topics = _topics_of(self.reader.connections, lambda c: c.msgcount)
         self.start_ns = self.reader.start_time
-        self.end_ns = self.reader.end_time
+        self.end_ns = self.reader.end_time - 1  # rosbags' end time is exclusive (last + 1 ns)
 
     def raw(self, topics: set[str] | None) -> Iterator[RawRecord]:
         conns = [c for c in self.reader.connections if topics is None or c.topic in topics]
