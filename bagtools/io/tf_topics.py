@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from bagtools.io.decode import TF_TYPES, TfArrays, decode_tf_message
 from bagtools.io.reader import BagReader, Record
 
@@ -21,6 +23,7 @@ class TfCollector:
         self.static_topic = static_topic
         self._dynamic: list[TfArrays] = []
         self._static: list[TfArrays] = []
+        self._dynamic_arrival_ns: list[int] = []
 
     @property
     def topics(self) -> tuple[str, str]:
@@ -37,11 +40,17 @@ class TfCollector:
         if rec.topic == self.static_topic:
             self._static.append(decode_tf_message(rec.msg))
         elif rec.topic == self.tf_topic:
-            self._dynamic.append(decode_tf_message(rec.msg))
+            arrays = decode_tf_message(rec.msg)
+            self._dynamic.append(arrays)
+            self._dynamic_arrival_ns.extend([rec.log_time_ns] * len(arrays))
 
     def arrays(self) -> tuple[TfArrays, TfArrays]:
         """(dynamic, static) transforms collected so far, each in bag-time order."""
         return TfArrays.concatenate(self._dynamic), TfArrays.concatenate(self._static)
+
+    def dynamic_arrival_ns(self) -> np.ndarray:
+        """(N,) int64 bag (arrival) time of each dynamic transform, aligned with ``arrays()[0]``."""
+        return np.asarray(self._dynamic_arrival_ns, dtype=np.int64)
 
 
 def read_tf_arrays(bag: BagReader, tf_topic: str = TF_TOPIC, static_topic: str = TF_STATIC_TOPIC) -> tuple[TfArrays, TfArrays]:
