@@ -1,0 +1,75 @@
+"""Planar poses [x y theta] to and from 3D (4x4) and 2D (3x3) homogeneous transforms.
+
+pose (3,) or (N,3): x, y in metres, theta in radians about +z (counter-clockwise
+seen from above). A pose of frame b in frame a is the transform T_a_b.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bagtools.transforms.checks import as_stack, check_tforms
+from bagtools.transforms.rotations import unstack
+
+
+def wrap_to_pi(angle_rad: np.ndarray | float) -> np.ndarray | float:
+    """Wrap angles in radians (any shape) to (-pi, pi]; odd multiples of pi map to +pi."""
+    angle = np.asarray(angle_rad, dtype=np.float64)
+    wrapped = np.mod(angle + np.pi, 2.0 * np.pi) - np.pi  # [-pi, pi)
+    wrapped = np.where(wrapped <= -np.pi, np.pi, wrapped)
+    return float(wrapped) if wrapped.ndim == 0 else wrapped
+
+
+def _planar_tforms(pose: object, size: int) -> tuple[np.ndarray, bool]:
+    pose_arr, single = as_stack(pose, "pose_xytheta", (3,))
+    cos_t, sin_t = np.cos(pose_arr[:, 2]), np.sin(pose_arr[:, 2])
+    tform = np.zeros((len(pose_arr), size, size))
+    tform[:, 0, 0], tform[:, 0, 1] = cos_t, -sin_t
+    tform[:, 1, 0], tform[:, 1, 1] = sin_t, cos_t
+    tform[:, 0, -1], tform[:, 1, -1] = pose_arr[:, 0], pose_arr[:, 1]
+    tform[:, range(2, size), range(2, size)] = 1.0
+    return tform, single
+
+
+def _poses(tform: np.ndarray) -> np.ndarray:
+    pose = np.empty((len(tform), 3))
+    pose[:, 0], pose[:, 1] = tform[:, 0, -1], tform[:, 1, -1]
+    pose[:, 2] = wrap_to_pi(np.arctan2(tform[:, 1, 0], tform[:, 0, 0]))
+    return pose
+
+
+def pose2tform(pose_xytheta: np.ndarray) -> np.ndarray:
+    """Planar pose [x y theta] (3,)/(N,3) (metres, radians) -> 3D transform (4,4)/(N,4,4).
+
+    Rotation about z by theta, translation [x y 0].
+    """
+    tform, single = _planar_tforms(pose_xytheta, 4)
+    return unstack(tform, single)
+
+
+def tform2pose(tform: np.ndarray) -> np.ndarray:
+    """3D transform (4,4)/(N,4,4) -> planar pose [x y theta] (3,)/(N,3), theta in (-pi, pi].
+
+    z, roll and pitch are dropped: theta is the yaw of the 'ZYX' Euler angles,
+    atan2(R[1,0], R[0,0]), so a transform of a robot on a slope still gives its heading
+    (undefined when the x axis points straight up or down; theta is 0 then).
+    """
+    tform_arr, single = as_stack(tform, "tform", (4, 4))
+    check_tforms(tform_arr, "tform", single)
+    return unstack(_poses(tform_arr), single)
+
+
+def pose2tform2d(pose_xytheta: np.ndarray) -> np.ndarray:
+    """Planar pose [x y theta] (3,)/(N,3) (metres, radians) -> 2D homogeneous transform (3,3)/(N,3,3).
+
+    [[cos -sin x], [sin cos y], [0 0 1]]: maps 2D points [px py 1] of the posed frame into the reference frame.
+    """
+    tform, single = _planar_tforms(pose_xytheta, 3)
+    return unstack(tform, single)
+
+
+def tform2d2pose(tform2d: np.ndarray) -> np.ndarray:
+    """2D homogeneous transform (3,3)/(N,3,3) -> planar pose [x y theta] (3,)/(N,3), theta in (-pi, pi]."""
+    tform_arr, single = as_stack(tform2d, "tform2d", (3, 3))
+    check_tforms(tform_arr, "tform2d", single)
+    return unstack(_poses(tform_arr), single)
