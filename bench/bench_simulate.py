@@ -1,0 +1,60 @@
+"""Simulator speed: simulated seconds per wall second, default configuration and 640x480 clouds.
+
+Baseline, measured in the same run: the same bag without any sensor simulation (route,
+controller, odometry, AMCL and the writer only, ``--no-cloud`` with the lidar replaced by
+constant ranges), i.e. the cost floor of the pipeline around the ray casting.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import simulate.pipeline as pipeline
+from bench.common import Row, best_time_s
+from simulate.pipeline import SimConfig, simulate_bag
+
+
+class _ConstantLidar:
+    """A lidar stand-in returning fixed ranges: isolates everything but the ray casting."""
+
+    angle_min_rad, angle_increment_rad, range_min_m, range_max_m, rate_hz = 0.0, 2 * np.pi / 360, 0.12, 3.5, 5.0
+
+    def scan(self, world, pose, rng) -> np.ndarray:
+        return np.full(360, 1.0, dtype=np.float32)
+
+
+def _speed(config: SimConfig, repeat: int) -> float:
+    tmp = Path(tempfile.mkdtemp(prefix="bench_simulate_"))
+    try:
+        wall = best_time_s(lambda: simulate_bag(tmp / "bag", config, force=True), repeat)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return config.duration_s / wall
+
+
+def _baseline_speed(duration_s: float, repeat: int) -> float:
+    original = pipeline.Lidar
+    pipeline.Lidar = _ConstantLidar
+    try:
+        return _speed(SimConfig(duration_s=duration_s, cloud=False), repeat)
+    finally:
+        pipeline.Lidar = original
+
+
+def run(quick: bool) -> list[Row]:
+    """Two rows: default configuration, and 640x480 clouds at 2 Hz; each against the sensor-free baseline."""
+    duration = 10.0 if quick else 60.0
+    repeat = 1 if quick else 2
+    baseline = _baseline_speed(duration, repeat)
+    default = _speed(SimConfig(duration_s=duration), repeat)
+    big = _speed(SimConfig(duration_s=duration / 4, cloud_size=(640, 480)), 1)
+    base = "same pipeline without sensor ray casting"
+    return [
+        Row("simulate", "default config (lidar + 160x120 cloud at 2 Hz), one core", default, "sim s / wall s", base,
+            baseline, True, ">= 50"),
+        Row("simulate", "640x480 clouds at 2 Hz, one core", big, "sim s / wall s", base, baseline, True, ""),
+    ]

@@ -1,0 +1,5 @@
+"""Simulator worlds: geometry, loading, ray casts (see :mod:`simulate.world.world`)."""
+
+from simulate.world.world import Cylinder, Prism, World, load_world, packaged_world_names
+
+__all__ = ["Cylinder", "Prism", "World", "load_world", "packaged_world_names"]
