@@ -30,8 +30,10 @@ class OdomNoise:
 
 ODOM_NOISE_LEVELS: dict[str, OdomNoise] = {
     "none": OdomNoise(0.0, 0.0, 0.0, quantize=False),
-    "realistic": OdomNoise(0.002, 0.01, 0.02, quantize=True),
-    "high": OdomNoise(0.006, 0.03, 0.06, quantize=True),
+    # Borenstein's UMBmark reports wheel-diameter mismatches of a few tenths of a percent and
+    # effective wheelbase errors of one to a few percent on uncalibrated differential drives.
+    "realistic": OdomNoise(0.003, 0.015, 0.02, quantize=True),
+    "high": OdomNoise(0.01, 0.05, 0.06, quantize=True),
 }
 
 

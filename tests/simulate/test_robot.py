@@ -103,8 +103,18 @@ def test_realistic_odometry_drift_grows_with_distance(world, seed):
     early = err[travelled <= 0.1 * travelled[-1]].max()
     late = err[travelled >= 0.5 * travelled[-1]].mean()
     assert late > 2.0 * early > 0.0
-    high, _, _ = _drift(world, "high", seed)
-    assert high[travelled >= 0.5 * travelled[-1]].mean() > late
+
+
+def test_high_odometry_noise_drifts_more_on_average(world):
+    # One bag's calibration errors can partly cancel, so compare the levels over several seeds.
+    def mean_late_drift(level: str) -> float:
+        drifts = []
+        for seed in range(4):
+            err, travelled, _ = _drift(world, level, seed, seconds=120.0)
+            drifts.append(err[travelled >= 0.5 * travelled[-1]].mean())
+        return float(np.mean(drifts))
+
+    assert mean_late_drift("high") > 1.5 * mean_late_drift("realistic")
 
 
 def test_odometry_twist_integrates_to_its_poses(world):
