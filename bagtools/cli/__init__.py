@@ -19,6 +19,7 @@ from bagtools.errors import BagtoolsError
 # name -> "module:attribute"; a command is registered here only once it works.
 COMMANDS: dict[str, str] = {
     "info": "bagtools.cli.info:info",
+    "tf": "bagtools.cli.tf:tf",
     "simulate": "bagtools.cli.simulate:simulate",
 }
 

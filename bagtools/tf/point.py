@@ -1,0 +1,205 @@
+"""``tf point``: follow points fixed in one frame through a bag, expressed in several target frames.
+
+The classic experiment: a point fixed in ``map`` stays put in map, drifts in
+``odom`` (as odometry drifts and localization corrects it) and sweeps around in
+the robot's base frame as the robot drives.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bagtools.errors import BagtoolsError
+from bagtools.outputs import OutputDir
+from bagtools.tf.buffer import TfBuffer, format_stamp
+from bagtools.tf.exceptions import ExtrapolationException
+from bagtools.tf.sampling import sample_stamps
+
+POINT_TYPES = ("geometry_msgs/msg/PointStamped",)
+DEFAULT_TARGETS = ("map", "odom", "base_footprint")
+OUTPUT_NAMES = ["point.csv", "point.png", "summary.json"]
+
+
+@dataclass(frozen=True)
+class FixedPoint:
+    """A point ``xyz`` (metres) fixed in ``frame``; ``clicked_ns`` is the stamp it was clicked at, if any."""
+
+    frame: str
+    xyz: tuple[float, float, float]
+    clicked_ns: int | None = None
+
+
+@dataclass(frozen=True)
+class PointTrack:
+    """Every point at every time step in every target frame.
+
+    ``stamp_ns`` (S,) int ns; ``xyz[target]`` (P, S, 3) metres, NaN where the
+    transform is missing at a step (e.g. a gap in the data).
+    """
+
+    points: list[FixedPoint]
+    targets: list[str]
+    stamp_ns: np.ndarray
+    xyz: dict[str, np.ndarray]
+
+
+def follow_points(buffer: TfBuffer, points: list[FixedPoint], targets: list[str], rate_hz: float = 10.0) -> PointTrack:
+    """Express each fixed point in each target frame at ``rate_hz`` over the span where all targets are available.
+
+    Raises tf's exceptions for unknown or unconnected frames, and an
+    ExtrapolationException when the targets have no common time span.
+    """
+    if not points:
+        raise BagtoolsError("no points to follow", buffer.path)
+    first, last = None, None
+    for point in points:
+        for target in targets:
+            span = buffer.time_range(target, point.frame)
+            if span is not None:
+                first = span[0] if first is None else max(first, span[0])
+                last = span[1] if last is None else min(last, span[1])
+    if first is None:   # every path is static: one step is enough
+        stamps = np.array([buffer.bag_span_ns[0] if buffer.bag_span_ns else 0], dtype=np.int64)
+    elif first > last:
+        raise ExtrapolationException(
+            f"the frames {', '.join(targets)} have no common time span with {points[0].frame}: "
+            f"data starts at {format_stamp(first)} but already ends at {format_stamp(last)}", buffer.path)
+    else:
+        stamps = sample_stamps(first, last, rate_hz)
+    xyz: dict[str, np.ndarray] = {}
+    for target in targets:
+        out = np.full((len(points), stamps.size, 3), np.nan)
+        for k, point in enumerate(points):
+            T, valid = buffer.lookup(target, point.frame, stamps, return_mask=True)
+            out[k] = T[:, :3, :3] @ np.asarray(point.xyz, dtype=np.float64) + T[:, :3, 3]
+            out[k, ~valid] = np.nan
+        xyz[target] = out
+    return PointTrack(list(points), list(targets), stamps, xyz)
+
+
+def point_csv(track: PointTrack) -> str:
+    """One row per point and time step: point, stamp_ns, t_s (from the first step), then x, y, z per target."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(["point", "stamp_ns", "t_s"] + [f"{t}_{axis}_m" for t in track.targets for axis in "xyz"])
+    t_s = (track.stamp_ns - track.stamp_ns[0]) / 1e9
+    for k in range(len(track.points)):
+        values = np.concatenate([track.xyz[t][k] for t in track.targets], axis=1)
+        for stamp, seconds, row in zip(track.stamp_ns.tolist(), t_s.tolist(), values.tolist()):
+            writer.writerow([k, stamp, f"{seconds:.6f}"] + ["" if np.isnan(v) else repr(v) for v in row])
+    return out.getvalue()
+
+
+def point_summary(track: PointTrack) -> dict:
+    """Per point and target: first and last position, largest offset from the first, and path length (metres)."""
+    per_point = []
+    for k, point in enumerate(track.points):
+        entry = {"frame": point.frame, "xyz": list(point.xyz), "clicked_ns": point.clicked_ns, "in_targets": {}}
+        for target in track.targets:
+            path = track.xyz[target][k]
+            good = path[~np.isnan(path).any(axis=1)]
+            if good.size == 0:
+                entry["in_targets"][target] = None
+                continue
+            entry["in_targets"][target] = {
+                "first_xyz_m": good[0].tolist(),
+                "last_xyz_m": good[-1].tolist(),
+                "max_offset_from_first_m": float(np.linalg.norm(good - good[0], axis=1).max()),
+                "path_length_m": float(np.linalg.norm(np.diff(good, axis=0), axis=1).sum()),
+            }
+        per_point.append(entry)
+    return {
+        "targets": track.targets,
+        "steps": int(track.stamp_ns.size),
+        "first_stamp_ns": int(track.stamp_ns[0]),
+        "last_stamp_ns": int(track.stamp_ns[-1]),
+        "points": per_point,
+    }
+
+
+def plot_track(track: PointTrack, path: Path) -> None:
+    """x-y paths of every point, one subplot per target frame, written as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(track.targets), figsize=(4.5 * len(track.targets), 4.5), squeeze=False)
+    for ax, target in zip(axes[0], track.targets):
+        for k, point in enumerate(track.points):
+            xy = track.xyz[target][k][:, :2]
+            line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.2, label=f"point {k} ({point.frame})")
+            good = xy[~np.isnan(xy).any(axis=1)]
+            if len(good):
+                ax.plot(*good[0], "o", color=line.get_color(), ms=5)
+                ax.plot(*good[-1], "s", color=line.get_color(), ms=5)
+        ax.set_title(f"in {target}  (o start, \u25a0 end)")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(True, alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def read_clicked_points(bag: str | Path, topic: str) -> tuple[TfBuffer, list[FixedPoint]]:
+    """One pass over the bag: its tf buffer and every geometry_msgs/PointStamped on ``topic``."""
+    from bagtools.io import TfCollector, open_bag, stamp_to_ns
+
+    collector = TfCollector()
+    points: list[FixedPoint] = []
+    with open_bag(bag) as reader:
+        collector.check(reader)
+        reader.require_topic(topic, POINT_TYPES)
+        wanted = [topic] + [t for t in collector.topics if t in reader.topics]
+        for rec in reader.messages(wanted):
+            if rec.topic == topic:
+                p = rec.msg.point
+                frame = rec.msg.header.frame_id.lstrip("/")
+                points.append(FixedPoint(frame, (float(p.x), float(p.y), float(p.z)), stamp_to_ns(rec.msg.header.stamp)))
+            else:
+                collector.add(rec)
+        span, path = (reader.start_ns, reader.end_ns), str(reader.path)
+    if not points:
+        raise BagtoolsError(f"topic '{topic}' has no messages", path)
+    buffer = TfBuffer.from_arrays(*collector.arrays(), skip_invalid=True)
+    buffer.path, buffer.bag_span_ns = path, span
+    return buffer, points
+
+
+def follow_point_bag(bag: str | Path, out_dir: str | Path, point: tuple[float, float, float] | None = None,
+                     frame: str | None = None, topic: str | None = None, targets: list[str] | None = None,
+                     rate_hz: float = 10.0, force: bool = False) -> tuple[PointTrack, list[str]]:
+    """Follow ``point`` fixed in ``frame`` (or every clicked point of ``topic``) and write the outputs.
+
+    Writes point.csv, point.png and summary.json into ``out_dir`` together.
+    ``targets`` None means the frames of DEFAULT_TARGETS the bag has. Returns
+    the track and warnings about skipped transforms.
+    """
+    if (point is None) == (topic is None) or (point is not None and not frame):
+        raise BagtoolsError("give either --point X Y Z with --frame F, or --topic", bag)
+    if topic is not None:
+        buffer, points = read_clicked_points(bag, topic)
+    else:
+        buffer = TfBuffer.from_bag(bag)
+        points = [FixedPoint(frame, tuple(float(v) for v in point))]
+    if targets is None:
+        targets = [t for t in DEFAULT_TARGETS if buffer.has_frame(t)]
+        if not targets:
+            raise BagtoolsError(f"none of the default target frames {', '.join(DEFAULT_TARGETS)} is in the bag; "
+                                f"give --targets (frames: {', '.join(buffer.frames)})", buffer.path)
+    track = follow_points(buffer, points, targets, rate_hz)
+    summary = point_summary(track) | {"bag": str(bag), "rate_hz": rate_hz}
+    with OutputDir(out_dir, OUTPUT_NAMES, force) as staged:
+        (staged / "point.csv").write_text(point_csv(track))
+        plot_track(track, staged / "point.png")
+        (staged / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return track, buffer.warnings
