@@ -429,6 +429,20 @@ class TfBuffer:
         stamps = [s for _, s in edges if s is not None]
         return min(stamps) if stamps else None
 
+    def chain_edges(self, target: str, source: str) -> list[tuple[str, str]]:
+        """The (parent, child) edges between two frames up to their common ancestor, by latest parents.
+
+        Raises LookupException / ConnectivityException as ``lookup`` does.
+        """
+        target_id = self._check_id(target, "chain_edges argument target_frame")
+        source_id = self._check_id(source, "chain_edges argument source_frame")
+        if target_id == source_id:
+            return []
+        edges = self._chain_to_common(target_id, source_id)
+        if edges is None:
+            raise self._connectivity(target_id, source_id)
+        return [(self._frames[self._frame_parent_latest(f)].name, self._frames[f].name) for f, _ in edges]
+
     def time_range(self, target: str, source: str) -> tuple[int, int] | None:
         """(first_ns, last_ns) over which every dynamic transform between the frames has data; None if all static.
 

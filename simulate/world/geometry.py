@@ -101,11 +101,11 @@ def ray_vertical_faces(
     denom = dx * ey - dy * ex  # (F,K); < 0 when the ray enters the face
     s_num = wx * dy - wy * dx  # s = s_num / denom must lie in [0, 1]
     hit = (denom < 0.0) & (s_num <= 0.0) & (s_num >= denom)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # misses are masked by `hit`
         t = w_cross_e / denom
-    if zmin is not None and zmax is not None:
-        dz_hit = t * dirs[:, 2]
-        hit &= (dz_hit >= (zmin - origin[2])[:, None]) & (dz_hit <= (zmax - origin[2])[:, None])
+        if zmin is not None and zmax is not None:
+            dz_hit = t * dirs[:, 2]
+            hit &= (dz_hit >= (zmin - origin[2])[:, None]) & (dz_hit <= (zmax - origin[2])[:, None])
     return np.where(hit, t, np.inf).min(axis=0)
 
 
@@ -140,11 +140,11 @@ def ray_cylinder_sides(
     b = dx * wx + dy * wy  # (C,K)
     disc = b * b - a * c
     ok = (disc >= 0.0) & (b < 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # misses are masked by `ok`
         t = (-b - np.sqrt(disc)) / a
-    if zmin is not None and zmax is not None:
-        dz_hit = t * dirs[:, 2]
-        ok &= (dz_hit >= (zmin - origin[2])[:, None]) & (dz_hit <= (zmax - origin[2])[:, None])
+        if zmin is not None and zmax is not None:
+            dz_hit = t * dirs[:, 2]
+            ok &= (dz_hit >= (zmin - origin[2])[:, None]) & (dz_hit <= (zmax - origin[2])[:, None])
     return np.where(ok, t, np.inf).min(axis=0)
 
 

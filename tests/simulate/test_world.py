@@ -21,9 +21,13 @@ def tb3() -> World:
 
 
 def _inner_wall_distance(p: np.ndarray) -> float:
-    """Distance from p inside the inner shell hexagon (apothem 2.54 m) to its nearest edge."""
-    normals = [(math.cos(a), math.sin(a)) for a in np.deg2rad([30, 90, 150, 210, 270, 330])]
-    return min(2.54 - (p[0] * nx + p[1] * ny) for nx, ny in normals)
+    """Distance from p (inside the shell) to the nearest edge line of the inner hexagon."""
+    ring = np.array(load_world("turtlebot3_world").to_json()["shell_wall"]["inner"])
+    dists = []
+    for a, b in zip(ring, np.roll(ring, -1, axis=0), strict=True):
+        e = (b - a) / np.linalg.norm(b - a)
+        dists.append(abs(e[0] * (p[1] - a[1]) - e[1] * (p[0] - a[0])))
+    return min(dists)
 
 
 def test_packaged_world_loads_with_all_parts(tb3: World) -> None:
