@@ -1,0 +1,159 @@
+"""nav2 PGM + YAML writer/reader round trip, pixel values, nav2 loading rules, bad files, PNG."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+from bagtools.errors import BagtoolsError, OutputExistsError
+from bagtools.grid import OccupancyGrid, nav2_map_files, read_nav2_map, render_map_png, write_map_png, write_nav2_map
+from bagtools.grid.mapio import pgm_bytes, read_pgm
+
+
+def toy_grid() -> OccupancyGrid:
+    """3 x 4 cells at 5 cm, bottom-left at (-1.25, 2.5); top-left occupied, bottom row free."""
+    p = np.array([
+        [0.95, 0.5, 0.5, 0.3],
+        [0.5, 0.7, 0.19, 0.5],
+        [0.1, 0.1, 0.1, 0.66],
+    ])
+    return OccupancyGrid.from_probabilities(p, 20.0, (-1.25, 2.5))
+
+
+def test_pgm_pixels_and_layout(tmp_path):
+    yaml_path = write_nav2_map(toy_grid(), tmp_path)
+    assert yaml_path == tmp_path / "map.yaml"
+    data = (tmp_path / "map.pgm").read_bytes()
+    header = b"P5\n4 3\n255\n"
+    assert data.startswith(header) and len(data) == len(header) + 12
+    pixels = np.frombuffer(data[len(header):], dtype=np.uint8).reshape(3, 4)
+    # row 0 of the image is the top of the map
+    assert pixels.tolist() == [
+        [0, 205, 205, 205],
+        [205, 0, 254, 205],
+        [254, 254, 254, 0],
+    ]
+
+
+def test_yaml_fields(tmp_path):
+    write_nav2_map(toy_grid(), tmp_path, name="floor")
+    text = (tmp_path / "floor.yaml").read_text()
+    assert text.splitlines() == [
+        "image: floor.pgm",
+        "mode: trinary",
+        "resolution: 0.05",
+        "origin: [-1.25, 2.5, 0.0]",
+        "negate: 0",
+        "occupied_thresh: 0.65",
+        "free_thresh: 0.196",
+    ]
+
+
+def test_round_trip_keeps_classes_and_geometry(tmp_path):
+    rng = np.random.default_rng(5)
+    grid = OccupancyGrid(3.0, 2.0, 20.0, (-7.3, 1.15))
+    for _ in range(5):
+        pose = np.r_[rng.uniform([-6.5, 1.5], [-5.0, 2.8]), rng.uniform(-3, 3)]
+        grid.insert_ray(pose, rng.uniform(0.2, 2.5, 90), np.linspace(-np.pi, np.pi, 90, endpoint=False), 2.0)
+    write_nav2_map(grid, tmp_path / "out")
+    loaded = read_nav2_map(tmp_path / "out" / "map.yaml")
+    np.testing.assert_array_equal(loaded.ternary(), grid.occupancy_matrix("ternary"))
+    assert set(np.unique(loaded.occupancy)) <= {-1, 0, 100}
+    assert loaded.resolution_m == pytest.approx(grid.cell_size_m)
+    np.testing.assert_allclose(loaded.origin[:2], grid.grid_location_in_world, atol=1e-9)
+    assert loaded.origin[2] == 0.0 and loaded.mode == "trinary" and not loaded.negate
+
+
+def test_nav2_rules_for_unknown_pixels(tmp_path):
+    """205 reads as p = 0.196: unknown with our free_thresh, free with map_saver's 0.25 default."""
+    (tmp_path / "m.pgm").write_bytes(pgm_bytes(np.array([[0, 205, 254, 100]], dtype=np.uint8)))
+    (tmp_path / "ours.yaml").write_text(
+        "image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    (tmp_path / "loose.yaml").write_text(
+        "image: m.pgm  # comment\nmode: trinary\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
+    (tmp_path / "neg.yaml").write_text(
+        "image: 'm.pgm'\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 1\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    assert read_nav2_map(tmp_path / "ours.yaml").occupancy.tolist() == [[100, -1, 0, -1]]
+    assert read_nav2_map(tmp_path / "loose.yaml").occupancy.tolist() == [[100, 0, 0, -1]]
+    # negate: bright is occupied. 100/255 = 0.39 is in between
+    assert read_nav2_map(tmp_path / "neg.yaml").occupancy.tolist() == [[0, 100, 100, -1]]
+
+
+def test_ascii_pgm_with_comments_and_maxval(tmp_path):
+    (tmp_path / "a.pgm").write_bytes(b"P2\n# made by hand\n3 1\n15\n0 15 8\n")
+    assert read_pgm(tmp_path / "a.pgm").tolist() == [[0, 255, 136]]
+
+
+def test_refuses_to_overwrite_without_force(tmp_path):
+    write_nav2_map(toy_grid(), tmp_path)
+    before = (tmp_path / "map.pgm").read_bytes()
+    other = OccupancyGrid(1.0, 1.0, 10.0)
+    with pytest.raises(OutputExistsError):
+        write_nav2_map(other, tmp_path)
+    assert (tmp_path / "map.pgm").read_bytes() == before
+    write_nav2_map(other, tmp_path, force=True)
+    assert (tmp_path / "map.pgm").read_bytes().startswith(b"P5\n10 10\n255\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.pgm", "map.yaml"]
+
+
+def test_nav2_map_files_for_staged_outputs():
+    files = nav2_map_files(toy_grid(), name="level1")
+    assert sorted(files) == ["level1.pgm", "level1.yaml"]
+    assert b"image: level1.pgm" in files["level1.yaml"]
+
+
+GOOD_YAML = "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+
+
+@pytest.mark.parametrize(
+    "yaml_text, image, match",
+    [
+        (None, b"P5\n1 1\n255\n\x00", "not found"),
+        (GOOD_YAML, None, "not found"),
+        (GOOD_YAML.replace("origin: [0, 0, 0]", "origin: [0, 0]"), b"P5\n1 1\n255\n\x00", "origin"),
+        (GOOD_YAML.replace("resolution: 0.05\n", ""), b"P5\n1 1\n255\n\x00", "resolution"),
+        (GOOD_YAML.replace("resolution: 0.05", "resolution: fine"), b"P5\n1 1\n255\n\x00", "not a number"),
+        (GOOD_YAML.replace("resolution: 0.05", "resolution: -1"), b"P5\n1 1\n255\n\x00", "positive"),
+        (GOOD_YAML.replace("image: m.pgm\n", ""), b"P5\n1 1\n255\n\x00", "image"),
+        (GOOD_YAML + "- a list item\n", b"P5\n1 1\n255\n\x00", "key: value"),
+        (GOOD_YAML.replace("negate: 0", "negate: maybe"), b"P5\n1 1\n255\n\x00", "negate"),
+        (GOOD_YAML + "mode: fancy\n", b"P5\n1 1\n255\n\x00", "mode"),
+        (GOOD_YAML, b"\x89PNG\r\n\x1a\n", "not a PGM"),
+        (GOOD_YAML, b"P5\n4 4\n255\n\x00\x00", "truncated"),
+        (GOOD_YAML, b"P5\n4 4\n65535\n", "8-bit"),
+        (GOOD_YAML, b"P5\nfour 4\n255\n", "malformed"),
+    ],
+)
+def test_bad_map_files_raise_one_line_errors(tmp_path, yaml_text, image, match):
+    if yaml_text is not None:
+        (tmp_path / "map.yaml").write_text(yaml_text)
+    if image is not None:
+        (tmp_path / "m.pgm").write_bytes(image)
+    with pytest.raises(BagtoolsError, match=match) as info:
+        read_nav2_map(tmp_path / "map.yaml")
+    assert info.value.path is not None and info.value.path.endswith((".yaml", ".pgm"))
+    assert "\n" not in str(info.value)
+
+
+def test_png_render_has_metric_extent_and_trajectory(tmp_path):
+    import matplotlib.image as mpimg
+
+    grid = OccupancyGrid(4.0, 2.0, 20.0, (-2.0, -1.0))
+    angles = np.linspace(-np.pi, np.pi, 180, endpoint=False)
+    grid.insert_ray([0.0, 0.0, 0.0], np.full(180, 0.9), angles, 3.0)
+    plain = mpimg.imread(io.BytesIO(render_map_png(grid)), format="png")
+    path = write_map_png(grid, tmp_path / "map.png", trajectory_xy=np.array([[-1.5, -0.5], [0.0, 0.0], [1.5, 0.5]]))
+    drawn = mpimg.imread(path, format="png")
+    assert drawn.shape == plain.shape and drawn.shape[1] > drawn.shape[0]  # wider than tall, like the map
+
+    def reddish(img):
+        return (img[..., 0] > 0.6) & (img[..., 1] < 0.4) & (img[..., 2] < 0.4)
+
+    assert reddish(drawn).sum() > 50 and reddish(plain).sum() == 0
+    with pytest.raises(OutputExistsError):
+        write_map_png(grid, path)
+    with pytest.raises(ValueError, match="trajectory"):
+        render_map_png(grid, trajectory_xy=np.zeros(5))
