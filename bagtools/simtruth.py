@@ -1,0 +1,63 @@
+"""The truth recorded in bags written by ``bagtools simulate``.
+
+A simulated bag carries its world geometry and simulator configuration as JSON in
+a std_msgs/String on ``/simulation/world``. Commands that can score their output
+against the truth (map-cloud, grid, ndt-odom) load it from here.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bagtools.errors import BagError
+from bagtools.io import BagReader, decode_odometry
+from bagtools.transforms import quat2tform, xyzw2quat
+
+if TYPE_CHECKING:
+    from simulate.world import World
+
+SIM_WORLD_TOPIC = "/simulation/world"
+GROUND_TRUTH_TOPIC = "/ground_truth"
+
+
+def read_sim_info(bag: BagReader) -> dict[str, Any] | None:
+    """The JSON document of ``/simulation/world`` ({"world", "config", "robot"}), or None for other bags."""
+    if SIM_WORLD_TOPIC not in bag.topics:
+        return None
+    record = next(bag.messages([SIM_WORLD_TOPIC]), None)
+    if record is None:
+        return None
+    try:
+        return json.loads(record.msg.data)
+    except (json.JSONDecodeError, AttributeError) as err:
+        raise BagError(f"{SIM_WORLD_TOPIC} does not hold the simulator's JSON: {err}", bag.path) from err
+
+
+def load_sim_world(bag: BagReader) -> World | None:
+    """The true world of a simulated bag, or None when the bag is not simulated."""
+    info = read_sim_info(bag)
+    if info is None or "world" not in info:
+        return None
+    from simulate.world import World
+
+    return World.from_dict(info["world"], path=bag.path)
+
+
+def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """The true poses of a simulated bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
+
+    Read from nav_msgs/Odometry on ``topic`` (the pose of base_footprint in map).
+    """
+    if topic not in bag.topics:
+        return None
+    samples = [decode_odometry(rec.msg) for rec in bag.messages([topic])]
+    if not samples:
+        return None
+    stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
+    T = quat2tform(xyzw2quat(np.array([s.orientation_xyzw for s in samples])))
+    T[:, :3, 3] = np.array([s.position_m for s in samples])
+    order = np.argsort(stamps, kind="stable")
+    return stamps[order], T[order], samples[0].child_frame_id
