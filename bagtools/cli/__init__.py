@@ -21,6 +21,7 @@ COMMANDS: dict[str, str] = {
     "info": "bagtools.cli.info:info",
     "tf": "bagtools.cli.tf:tf",
     "simulate": "bagtools.cli.simulate:simulate",
+    "map-cloud": "bagtools.cli.map_cloud:map_cloud",
 }
 
 

@@ -1,0 +1,62 @@
+"""Accumulating transformed points into a map whose memory is bounded by the map, not the input."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def random_subset(points: np.ndarray, fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """Keep round(fraction * N) points chosen at random without replacement (MATLAB pcdownsample 'random')."""
+    n = points.shape[0]
+    keep = int(round(fraction * n))
+    if keep >= n:
+        return points
+    index = np.sort(rng.choice(n, size=keep, replace=False))
+    return points[index]
+
+
+def voxel_downsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """Average the points in each voxel of edge ``voxel_m`` (Open3D's voxel_down_sample)."""
+    import open3d as o3d
+
+    if points.shape[0] == 0:
+        return points
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points.astype(np.float64)))
+    return np.asarray(cloud.voxel_down_sample(voxel_m).points, dtype=np.float32)
+
+
+class PointAccumulator:
+    """Collects map points (N,3) float32 in the map frame.
+
+    With ``voxel_m`` set, the collected points are voxel-downsampled whenever the
+    pending part grows past ``compact_every`` points, so memory stays bounded by
+    the number of occupied voxels.
+    """
+
+    def __init__(self, voxel_m: float | None = None, compact_every: int = 2_000_000) -> None:
+        self.voxel_m = voxel_m
+        self.compact_every = compact_every
+        self._parts: list[np.ndarray] = []
+        self._pending = 0
+        self.points_added = 0
+
+    def add(self, points_map: np.ndarray) -> None:
+        """Add (N,3) points already in the map frame."""
+        if points_map.shape[0] == 0:
+            return
+        self._parts.append(np.asarray(points_map, dtype=np.float32))
+        self._pending += points_map.shape[0]
+        self.points_added += points_map.shape[0]
+        if self.voxel_m and self._pending > self.compact_every:
+            self._parts = [voxel_downsample(np.concatenate(self._parts), self.voxel_m)]
+            self._pending = 0
+
+    def points(self) -> np.ndarray:
+        """The map: (M,3) float32 (voxel-downsampled if ``voxel_m`` is set)."""
+        if not self._parts:
+            return np.empty((0, 3), dtype=np.float32)
+        merged = np.concatenate(self._parts)
+        if self.voxel_m:
+            merged = voxel_downsample(merged, self.voxel_m)
+            self._parts, self._pending = [merged], 0
+        return merged

@@ -1,0 +1,239 @@
+"""Mapping with known poses: every cloud of a bag, moved into one fixed frame by tf.
+
+The pipeline reads the bag twice: once for /tf and /tf_static (small), then it
+streams the sensor topic, so memory is bounded by the map, not by the bag:
+
+    CloudMapPipeline(bag, options).run()
+        _load_tf()          the tf buffer (and arrival times for --stamp latest)
+        _map_clouds()       per message: pose lookup, range cut, sampling, transform, accumulate
+        _evaluate()         distance of the map to the true world, for simulated bags
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from bagtools.cloudmap.accumulator import PointAccumulator, random_subset
+from bagtools.cloudmap.sources import iter_sensor_points
+from bagtools.errors import BagtoolsError
+from bagtools.io import BagReader, TfCollector, open_bag
+from bagtools.progress import progress
+from bagtools.simtruth import load_sim_world, read_ground_truth
+from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
+
+StampMode = Literal["message", "latest"]
+
+
+@dataclass(frozen=True)
+class CloudMapOptions:
+    """What to map and how.
+
+    ``stamp``: 'message' looks each cloud's pose up at its header stamp
+    (interpolated); 'latest' uses the newest transform that had arrived by the
+    cloud's bag time, as a naive live subscriber would. ``sample`` keeps that
+    random fraction of each cloud (seeded); ``voxel_m`` downsamples the map;
+    ``max_range_m`` drops points farther than that from the sensor.
+    """
+
+    topic: str = "/camera/depth/points"
+    frame: str = "map"
+    stamp: StampMode = "message"
+    sample: float = 0.01
+    voxel_m: float | None = None
+    max_range_m: float | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.sample <= 1.0:
+            raise BagtoolsError(f"--sample must be in (0, 1], got {self.sample}")
+        if self.voxel_m is not None and self.voxel_m <= 0:
+            raise BagtoolsError(f"--voxel must be positive, got {self.voxel_m}")
+        if self.max_range_m is not None and self.max_range_m <= 0:
+            raise BagtoolsError(f"--max-range must be positive, got {self.max_range_m}")
+        if self.stamp not in ("message", "latest"):
+            raise BagtoolsError(f"--stamp must be 'message' or 'latest', got {self.stamp!r}")
+
+
+@dataclass
+class CloudMapResult:
+    """The map (N,3) float32 in ``options.frame``, the sensor positions used, and the summary."""
+
+    points: np.ndarray
+    sensor_path: np.ndarray
+    summary: dict = field(default_factory=dict)
+
+
+def _skip_reason(err: TransformException) -> str:
+    """A short reason for the skip counts in summary.json."""
+    if isinstance(err, ExtrapolationException):
+        return "outside tf data"
+    if isinstance(err, LookupException):
+        return "unknown frame"
+    if isinstance(err, ConnectivityException):
+        return "frames not connected"
+    return "invalid transform"
+
+
+class CloudMapPipeline:
+    """Builds one point-cloud map from one bag (see the module docstring)."""
+
+    def __init__(self, bag_path: str | Path, options: CloudMapOptions) -> None:
+        self.bag_path = Path(bag_path)
+        self.options = options
+        self.rng = np.random.default_rng(options.seed)
+        self.accumulator = PointAccumulator(options.voxel_m)
+        self.skipped: Counter[str] = Counter()
+        self.clouds_used = 0
+        self.points_in = 0
+        self.sensor_frames: set[str] = set()
+        self._sensor_path: list[np.ndarray] = []
+
+    def run(self) -> CloudMapResult:
+        with open_bag(self.bag_path) as bag:
+            bag.require_topic(self.options.topic)
+            self._load_tf(bag)
+            self._map_clouds(bag)
+            self.warnings = list(bag.warnings)
+            points = self.accumulator.points()
+            summary = self._summary(points)
+            summary.update(self._evaluate(bag, points))
+        return CloudMapResult(points, np.array(self._sensor_path).reshape(-1, 3), summary)
+
+    # -- steps -------------------------------------------------------------------
+
+    def _load_tf(self, bag: BagReader) -> None:
+        collector = TfCollector()
+        collector.check(bag)
+        for rec in bag.messages([t for t in collector.topics if t in bag.topics]):
+            collector.add(rec)
+        dynamic, static = collector.arrays()
+        self.buffer = TfBuffer.from_arrays(dynamic, static)
+        self._arrival = _ArrivalIndex(dynamic, collector.dynamic_arrival_ns())
+        if not self.buffer.frames:
+            raise BagtoolsError("bag has no /tf or /tf_static data, so clouds cannot be placed in a frame", bag.path)
+        if not self.buffer.has_frame(self.options.frame):
+            known = ", ".join(self.buffer.frames)
+            raise BagtoolsError(f"frame '{self.options.frame}' is not in the tf tree (frames: {known})", bag.path)
+
+    def _pose(self, sensor_frame: str, stamp_ns: int, log_time_ns: int) -> np.ndarray:
+        """T_frame_sensor for one message, by the chosen stamp policy (raises TransformException)."""
+        target = self.options.frame
+        if self.options.stamp == "latest":
+            chain = self.buffer.chain_edges(target, sensor_frame)
+            stamp_ns = self._arrival.latest_common_stamp(chain, log_time_ns)
+        return self.buffer.lookup(target, sensor_frame, stamp_ns)
+
+    def _map_clouds(self, bag: BagReader) -> None:
+        opts = self.options
+        total = bag.topics[opts.topic].count
+        for item in progress(iter_sensor_points(bag, opts.topic), total=total, desc="mapping", unit="cloud"):
+            self.sensor_frames.add(item.frame_id)
+            self.points_in += item.points.shape[0]
+            if item.points.shape[0] == 0:
+                self.skipped["empty cloud"] += 1
+                continue
+            try:
+                T_frame_sensor = self._pose(item.frame_id, item.stamp_ns, item.log_time_ns)
+            except TransformException as err:
+                self.skipped[_skip_reason(err)] += 1
+                continue
+            points = item.points
+            if opts.max_range_m is not None:
+                points = points[np.einsum("ij,ij->i", points, points) <= opts.max_range_m**2]
+            points = random_subset(points, opts.sample, self.rng)
+            R, t = T_frame_sensor[:3, :3], T_frame_sensor[:3, 3]
+            self.accumulator.add((points.astype(np.float64) @ R.T + t).astype(np.float32))
+            self._sensor_path.append(t.copy())
+            self.clouds_used += 1
+
+    def _evaluate(self, bag: BagReader, points: np.ndarray) -> dict:
+        """For a simulated bag: distances of the map's points to the true world surfaces.
+
+        A map in another frame than map (odom, say) is first placed in the world
+        where that frame really was: anchored at the first ground-truth pose at
+        which the frame -> robot transform is known, so what remains is the
+        drift of the frame, not its arbitrary origin.
+        """
+        world = load_sim_world(bag)
+        if world is None:
+            return {}
+        T_map_frame = np.eye(4)
+        result: dict = {}
+        if self.options.frame != "map":
+            truth = read_ground_truth(bag)
+            if truth is None:
+                return {}
+            stamps, T_map_base, base = truth
+            T_frame_base, valid = self.buffer.lookup(self.options.frame, base, stamps, return_mask=True)
+            if not valid.any():
+                return {}
+            first = int(np.flatnonzero(valid)[0])
+            T_map_frame = T_map_base[first] @ np.linalg.inv(T_frame_base[first])
+            result["truth_anchor"] = {"frame": self.options.frame, "robot_frame": base, "stamp_ns": int(stamps[first])}
+        in_map = points.astype(np.float64) @ T_map_frame[:3, :3].T + T_map_frame[:3, 3]
+        result["accuracy_vs_truth_m"] = _distance_stats(world.surface_distance_m(in_map))
+        return result
+
+    def _summary(self, points: np.ndarray) -> dict:
+        return {
+            "bag": str(self.bag_path),
+            "topic": self.options.topic,
+            "frame": self.options.frame,
+            "sensor_frames": sorted(self.sensor_frames),
+            "clouds_used": self.clouds_used,
+            "clouds_skipped": dict(self.skipped),
+            "points_in": self.points_in,
+            "points_accumulated": self.accumulator.points_added,
+            "points_out": int(points.shape[0]),
+            "options": asdict(self.options),
+            "warnings": self.warnings,
+        }
+
+
+def _distance_stats(distances_m: np.ndarray) -> dict:
+    if distances_m.size == 0:
+        return {"points": 0}
+    return {
+        "points": int(distances_m.size),
+        "mean": float(distances_m.mean()),
+        "median": float(np.median(distances_m)),
+        "p95": float(np.percentile(distances_m, 95)),
+    }
+
+
+class _ArrivalIndex:
+    """For each tf edge, the newest header stamp that had arrived by a given bag time."""
+
+    def __init__(self, dynamic, arrival_ns: np.ndarray) -> None:
+        self._by_edge: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+        parents = np.array([p.lstrip("/") for p in dynamic.parent], dtype=object)
+        children = np.array([c.lstrip("/") for c in dynamic.child], dtype=object)
+        for parent, child in set(zip(parents, children)):
+            rows = np.flatnonzero((parents == parent) & (children == child))
+            order = np.argsort(arrival_ns[rows], kind="stable")
+            arrivals = arrival_ns[rows][order]
+            newest = np.maximum.accumulate(dynamic.stamp_ns[rows][order])
+            self._by_edge[(parent, child)] = (arrivals, newest)
+
+    def latest_common_stamp(self, chain: list[tuple[str, str]], log_time_ns: int) -> int:
+        """min over the chain's dynamic edges of the newest stamp arrived by ``log_time_ns``.
+
+        Static edges do not count (as in tf2). Raises ExtrapolationException when
+        an edge had no data yet.
+        """
+        stamps = []
+        for edge in chain:
+            entry = self._by_edge.get(edge)
+            if entry is None:
+                continue
+            arrivals, newest = entry
+            i = int(np.searchsorted(arrivals, log_time_ns, side="right")) - 1
+            if i < 0:
+                raise ExtrapolationException(f"no transform {edge[0]} -> {edge[1]} had arrived by bag time {log_time_ns}")
+            stamps.append(int(newest[i]))
+        return min(stamps) if stamps else 0
