@@ -23,7 +23,7 @@ from bagtools.cloudmap.sources import iter_sensor_points
 from bagtools.errors import BagtoolsError
 from bagtools.io import BagReader, TfCollector, open_bag
 from bagtools.progress import progress
-from bagtools.simtruth import load_sim_world, read_ground_truth
+from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
 
 StampMode = Literal["message", "latest"]
@@ -170,10 +170,10 @@ class CloudMapPipeline:
                 return {}
             stamps, T_map_base, base = truth
             T_frame_base, valid = self.buffer.lookup(self.options.frame, base, stamps, return_mask=True)
-            if not valid.any():
+            anchor = anchor_frame_in_map(T_map_base, T_frame_base, valid)
+            if anchor is None:
                 return {}
-            first = int(np.flatnonzero(valid)[0])
-            T_map_frame = T_map_base[first] @ np.linalg.inv(T_frame_base[first])
+            T_map_frame, first = anchor
             result["truth_anchor"] = {"frame": self.options.frame, "robot_frame": base, "stamp_ns": int(stamps[first])}
         in_map = points.astype(np.float64) @ T_map_frame[:3, :3].T + T_map_frame[:3, 3]
         result["accuracy_vs_truth_m"] = _distance_stats(world.surface_distance_m(in_map))

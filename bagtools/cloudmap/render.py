@@ -16,22 +16,47 @@ def write_point_cloud(path: Path, points: np.ndarray) -> None:
         raise OSError(f"Open3D could not write {path}")
 
 
-def _density(ax, u: np.ndarray, v: np.ndarray, cell_m: float, label_u: str, label_v: str, title: str) -> None:
-    import matplotlib.colors as mcolors
+def _grid_edges(u: np.ndarray, v: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray]:
+    return (np.arange(u.min() - cell_m, u.max() + 2 * cell_m, cell_m),
+            np.arange(v.min() - cell_m, v.max() + 2 * cell_m, cell_m))
 
-    if u.size == 0:
-        ax.text(0.5, 0.5, "no points", ha="center", va="center", transform=ax.transAxes)
-    else:
-        u_edges = np.arange(u.min() - cell_m, u.max() + 2 * cell_m, cell_m)
-        v_edges = np.arange(v.min() - cell_m, v.max() + 2 * cell_m, cell_m)
-        hist, _, _ = np.histogram2d(u, v, bins=(u_edges, v_edges))
-        ax.imshow(np.ma.masked_equal(hist.T, 0), origin="lower", cmap="viridis", norm=mcolors.LogNorm(),
-                  extent=(u_edges[0], u_edges[-1], v_edges[0], v_edges[-1]), interpolation="nearest")
+
+def _finish_axes(ax, label_u: str, label_v: str, title: str) -> None:
     ax.set_xlabel(label_u)
     ax.set_ylabel(label_v)
     ax.set_title(title)
     ax.set_aspect("equal")
     ax.grid(True, alpha=0.3)
+
+
+def _height_image(fig, ax, points: np.ndarray, cell_m: float, frame: str, title: str) -> None:
+    """Top view: the highest point of each cell, coloured by height, so walls stand out from the floor."""
+    if points.shape[0] == 0:
+        ax.text(0.5, 0.5, "no points", ha="center", va="center", transform=ax.transAxes)
+    else:
+        u_edges, v_edges = _grid_edges(points[:, 0], points[:, 1], cell_m)
+        iu = np.clip(np.searchsorted(u_edges, points[:, 0], side="right") - 1, 0, u_edges.size - 2)
+        iv = np.clip(np.searchsorted(v_edges, points[:, 1], side="right") - 1, 0, v_edges.size - 2)
+        top = np.full((v_edges.size - 1, u_edges.size - 1), -np.inf)
+        np.maximum.at(top, (iv, iu), points[:, 2].astype(np.float64))
+        image = ax.imshow(np.ma.masked_invalid(np.where(np.isinf(top), np.nan, top)), origin="lower", cmap="viridis",
+                          extent=(u_edges[0], u_edges[-1], v_edges[0], v_edges[-1]), interpolation="nearest")
+        fig.colorbar(image, ax=ax, label=f"highest z in {frame} [m]", shrink=0.8)
+    _finish_axes(ax, f"x in {frame} [m]", f"y in {frame} [m]", title)
+
+
+def _density(ax, u: np.ndarray, v: np.ndarray, cell_m: float, label_u: str, label_v: str, title: str) -> None:
+    """Side view: point density (log scale)."""
+    import matplotlib.colors as mcolors
+
+    if u.size == 0:
+        ax.text(0.5, 0.5, "no points", ha="center", va="center", transform=ax.transAxes)
+    else:
+        u_edges, v_edges = _grid_edges(u, v, cell_m)
+        hist, _, _ = np.histogram2d(u, v, bins=(u_edges, v_edges))
+        ax.imshow(np.ma.masked_equal(hist.T, 0), origin="lower", cmap="magma_r", norm=mcolors.LogNorm(),
+                  extent=(u_edges[0], u_edges[-1], v_edges[0], v_edges[-1]), interpolation="nearest")
+    _finish_axes(ax, label_u, label_v, title)
 
 
 def render_map_png(path: Path, points: np.ndarray, frame: str, trajectory_xyz: np.ndarray | None = None,
@@ -44,8 +69,8 @@ def render_map_png(path: Path, points: np.ndarray, frame: str, trajectory_xyz: n
 
     fig, (top, side) = plt.subplots(2, 1, figsize=(8, 10), gridspec_kw={"height_ratios": [3, 1]})
     cell = 0.02
-    _density(top, points[:, 0], points[:, 1], cell, f"x in {frame} [m]", f"y in {frame} [m]", f"{title}: top view ({len(points)} points)")
-    _density(side, points[:, 0], points[:, 2], cell, f"x in {frame} [m]", f"z in {frame} [m]", "side view")
+    _height_image(fig, top, points, cell, frame, f"{title}: top view ({len(points)} points)")
+    _density(side, points[:, 0], points[:, 2], cell, f"x in {frame} [m]", f"z in {frame} [m]", "side view (point density)")
     if trajectory_xyz is not None and len(trajectory_xyz):
         top.plot(trajectory_xyz[:, 0], trajectory_xyz[:, 1], color="red", linewidth=1.0, label="sensor path")
         top.legend(loc="upper right")
