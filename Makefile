@@ -31,12 +31,15 @@ setup: sysdeps $(VENV)/.installed
 demo: setup
 	$(BAGTOOLS) simulate $(OUT)/turtlebot3_sim --force
 	$(BAGTOOLS) info $(OUT)/turtlebot3_sim
+	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map --voxel 0.02 --sample 0.2 --force
+	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map_odom --frame odom --voxel 0.02 --sample 0.2 --force
 	@echo "demo outputs are under $(OUT)/"
 
 test: setup
 	$(PY) -m pytest -q
 
 bench: setup
+	$(PY) -m pip install -q -e '.[test,bench]'
 	$(PY) -m bench
 
 fixtures: setup
