@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "tf": "bagtools.cli.tf:tf",
     "simulate": "bagtools.cli.simulate:simulate",
     "map-cloud": "bagtools.cli.map_cloud:map_cloud",
+    "ndt-odom": "bagtools.cli.ndt_odom:ndt_odom",
 }
 
 
