@@ -69,7 +69,9 @@ class OutputDir:
 
     On entry, refuses (``OutputExistsError``) if any named file already exists in
     ``out_dir`` and ``force`` is false. On success every staged file is renamed
-    into ``out_dir``; on error nothing in ``out_dir`` changes.
+    into ``out_dir`` and named outputs this run did not produce are removed (so
+    no stale result from an earlier run remains); on error nothing in
+    ``out_dir`` changes.
     """
 
     def __init__(self, out_dir: str | Path, names: list[str], force: bool = False) -> None:
@@ -91,7 +93,14 @@ class OutputDir:
         assert self._tmp is not None
         try:
             if exc_type is None:
-                for staged in sorted(self._tmp.iterdir()):
-                    os.replace(staged, self.out_dir / staged.name)
+                produced = {p.name for p in self._tmp.iterdir()}
+                for name in sorted(produced):
+                    os.replace(self._tmp / name, self.out_dir / name)
+                # With force, a named output this run did not produce must not
+                # survive from an earlier run and pass for a result of this one.
+                for name in self.names:
+                    stale = self.out_dir / name
+                    if name not in produced and stale.is_file():
+                        stale.unlink()
         finally:
             shutil.rmtree(self._tmp, ignore_errors=True)

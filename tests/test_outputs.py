@@ -58,3 +58,13 @@ def test_output_dir_publishes_all_or_nothing(tmp_path: Path) -> None:
     with OutputDir(out, ["map.yaml"], force=True) as staged:
         (staged / "map.yaml").write_text("image: new.pgm\n")
     assert (out / "map.yaml").read_text() == "image: new.pgm\n" and (out / "other.txt").read_text() == "kept"
+
+
+def test_output_dir_removes_stale_named_outputs_with_force(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with OutputDir(out, ["trajectory.tum", "ground_truth.tum"]) as staged:
+        (staged / "trajectory.tum").write_text("a")
+        (staged / "ground_truth.tum").write_text("truth of another bag")
+    with OutputDir(out, ["trajectory.tum", "ground_truth.tum"], force=True) as staged:
+        (staged / "trajectory.tum").write_text("b")
+    assert sorted(p.name for p in out.iterdir()) == ["trajectory.tum"]
