@@ -33,6 +33,7 @@ demo: setup
 	$(BAGTOOLS) info $(OUT)/turtlebot3_sim
 	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map --voxel 0.02 --sample 0.2 --force
 	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map_odom --frame odom --voxel 0.02 --sample 0.2 --force
+	$(BAGTOOLS) ndt-odom $(OUT)/turtlebot3_sim --out $(OUT)/ndt_odom --force
 	@echo "demo outputs are under $(OUT)/"
 
 test: setup
