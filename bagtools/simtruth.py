@@ -61,3 +61,20 @@ def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC) -> tuple[
     T[:, :3, 3] = np.array([s.position_m for s in samples])
     order = np.argsort(stamps, kind="stable")
     return stamps[order], T[order], samples[0].child_frame_id
+
+
+def anchor_frame_in_map(T_map_base: np.ndarray, T_frame_base: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """Where a drifting frame (odom, say) really was: T_map_frame (4,4) and the sample it was anchored at.
+
+    Given the true base poses T_map_base (N,4,4) and the same base's poses in the
+    frame, T_frame_base (N,4,4), at the same N stamps (``valid`` (N,) bool marks
+    which of the latter are known), the frame is placed so that the two agree at
+    the first valid stamp: T_map_frame = T_map_base[i] @ inv(T_frame_base[i]).
+    What remains between them afterwards is the frame's drift, not its arbitrary
+    origin. None when no stamp is valid.
+    """
+    valid = np.asarray(valid, dtype=bool)
+    if not valid.any():
+        return None
+    first = int(np.flatnonzero(valid)[0])
+    return T_map_base[first] @ np.linalg.inv(T_frame_base[first]), first

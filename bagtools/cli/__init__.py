@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "simulate": "bagtools.cli.simulate:simulate",
     "map-cloud": "bagtools.cli.map_cloud:map_cloud",
     "ndt-odom": "bagtools.cli.ndt_odom:ndt_odom",
+    "grid": "bagtools.cli.grid:grid",
 }
 
 

@@ -1,0 +1,55 @@
+"""What ``bagtools grid`` builds and how: the options of the grid-mapping pipeline."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from bagtools.errors import BagtoolsError
+
+POSES_TF = "tf"
+POSES_GROUND_TRUTH = "ground-truth"
+
+MAX_GRID_CELLS = 100_000_000
+"""The largest grid the pipeline builds (10^8 cells, 400 MB of float32 log-odds): a bad pose must not allocate more."""
+
+
+@dataclass(frozen=True)
+class GridMapOptions:
+    """Options of :class:`~bagtools.gridmap.GridMapPipeline`.
+
+    ``poses``: 'tf' (the scan frame's pose in ``frame`` from the bag's tf at each
+    scan stamp), 'ground-truth' (the simulator's ``/ground_truth``, in map), or
+    the path of a TUM trajectory of the robot base in ``frame``.
+    ``resolution``: cells per metre. ``max_range_m``: lowers each scan's
+    range_max (None keeps it). ``base_frame``: the robot frame a trajectory
+    (TUM) describes; None picks the ``/odom`` child frame, else base_footprint
+    or base_link from tf. ``max_cells``: refuse to build a larger grid.
+    """
+
+    topic: str = "/scan"
+    frame: str = "map"
+    poses: str = POSES_TF
+    resolution: float = 20.0
+    max_range_m: float | None = None
+    base_frame: str | None = None
+    max_cells: int = MAX_GRID_CELLS
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.resolution) and self.resolution > 0):
+            raise BagtoolsError(f"--resolution must be a positive number of cells per metre, got {self.resolution}")
+        if self.max_range_m is not None and not (math.isfinite(self.max_range_m) and self.max_range_m > 0):
+            raise BagtoolsError(f"--max-range must be a positive number of metres, got {self.max_range_m}")
+        if not self.frame or self.frame.startswith("/"):
+            raise BagtoolsError(f"--frame must be a tf frame id without a leading '/', got {self.frame!r}")
+        if not self.poses:
+            raise BagtoolsError("--poses must be 'tf', 'ground-truth' or a TUM file")
+        if self.poses == POSES_GROUND_TRUTH and self.frame != "map":
+            raise BagtoolsError(f"--poses ground-truth gives poses in the map frame; use --frame map, not {self.frame!r}")
+        if self.max_cells <= 0:
+            raise BagtoolsError(f"max_cells must be positive, got {self.max_cells}")
+
+    @property
+    def poses_kind(self) -> str:
+        """'tf', 'ground-truth' or 'tum'."""
+        return self.poses if self.poses in (POSES_TF, POSES_GROUND_TRUTH) else "tum"

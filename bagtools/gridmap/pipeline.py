@@ -1,0 +1,331 @@
+"""Occupancy-grid mapping with known poses: every laser scan of a bag into one 2-D grid.
+
+    GridMapPipeline(bag, options).run()
+        _load_tf()          the bag's tf buffer (small: /tf and /tf_static)
+        _pose_source()      tf, /ground_truth or a TUM trajectory (see bagtools.gridmap.poses)
+        _map_scans()        per chunk of scans: batched pose lookup, grid growth; per scan: insert_ray
+        _evaluate()         the map against the true world, for simulated bags
+
+Each scan goes into the grid with MATLAB's insertRay semantics
+(:meth:`bagtools.grid.OccupancyGrid.insert_ray`), from the scan frame's
+position, each beam turned by the scan frame's orientation (a scanner mounted
+upside down maps correctly). The beams follow the ROS LaserScan conventions
+(REP 117): +inf means no return (free up to the maximum range), NaN and
+values below range_min or finite values above range_max carry no information
+and are ignored. The maximum range is the scan's range_max, lowered by
+``--max-range``; returns at or beyond it mark free space only.
+
+Nothing can be built, and the pipeline raises :class:`BagtoolsError`, when no
+scan can be posed, or when no posed scan holds a single return within its range
+limits (all NaN, infinite or out of range): such scans show no obstacle, so
+there is no map. Scans with no valid range at all are skipped and counted;
+scans with only +inf ranges still clear free space and are counted.
+
+The grid starts at the bounds of the first chunk's scan positions plus the
+maximum range and grows with each chunk; it is refused beyond
+``options.max_cells`` (a bad pose must not allocate a huge grid).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bagtools.errors import BagtoolsError
+from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
+from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
+from bagtools.gridmap.poses import ScanPoseSource, drop_translation_spikes, TfScanPoses, TrajectoryScanPoses
+from bagtools.gridmap.scans import PosedScan, iter_posed_scan_chunks
+from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, decode_odometry, open_bag, read_tf_arrays
+from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
+from bagtools.tf import TfBuffer
+from bagtools.trajectory import read_tum
+
+SKIP_NO_VALID_RANGES = "no valid ranges"
+SKIP_NO_MAX_RANGE = "range_max not positive (give --max-range)"
+BASE_FRAME_CANDIDATES = ("base_footprint", "base_link")
+SCORE_TOLERANCE_CELLS = 1
+
+
+@dataclass
+class GridMapResult:
+    """The grid (in ``options.frame``), the scan positions used ((N,2) metres, same frame) and the summary."""
+
+    grid: OccupancyGrid
+    scan_path_xy: np.ndarray
+    summary: dict = field(default_factory=dict)
+
+
+class GridMapPipeline:
+    """Builds one occupancy grid from one bag (see the module docstring)."""
+
+    def __init__(self, bag_path: str | Path, options: GridMapOptions) -> None:
+        self.bag_path = Path(bag_path)
+        self.options = options
+        self.grid: OccupancyGrid | None = None
+        self.skipped: Counter[str] = Counter()
+        self.scans_total = 0
+        self.scans_used = 0
+        self.scans_without_returns = 0
+        self.beams_used = 0
+        self.returns_used = 0
+        self.scan_frames: set[str] = set()
+        self.max_ranges_m: set[float] = set()
+        self.warnings: list[str] = []
+        self._path: list[np.ndarray] = []
+        self._scan_z: list[float] = []
+
+    def run(self) -> GridMapResult:
+        """Read the bag and build the grid; raises :class:`BagtoolsError` when nothing can be built."""
+        t0 = time.perf_counter()
+        with open_bag(self.bag_path) as bag:
+            bag.require_topic(self.options.topic, LASERSCAN_TYPES)
+            self._load_tf(bag)
+            self.poses = self._pose_source(bag)
+            grid = self._map_scans(bag)
+            self.warnings = list(bag.warnings) + self.buffer.warnings + self.poses.warnings + self.warnings
+            summary = self._summary(grid)
+            summary["elapsed_s"] = round(time.perf_counter() - t0, 3)
+            summary.update(self._evaluate(bag, grid))
+        return GridMapResult(grid, np.array(self._path).reshape(-1, 2), summary)
+
+    # -- steps -------------------------------------------------------------------
+
+    def _load_tf(self, bag: BagReader) -> None:
+        dynamic, static = read_tf_arrays(bag)
+        dynamic, dropped = drop_translation_spikes(dynamic)
+        for (parent, child), count in dropped.items():
+            self.warnings.append(f"dropped {count} corrupt /tf samples {parent} -> {child} "
+                                 "(translation leaping away from its neighbours and back)")
+        self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
+        if self.options.poses_kind != POSES_TF:
+            return
+        if not self.buffer.frames:
+            raise BagtoolsError("bag has no /tf or /tf_static data, so scans cannot be placed in a frame "
+                                "(try --poses ground-truth or --poses TRAJ.tum)", bag.path)
+        if not self.buffer.has_frame(self.options.frame):
+            known = ", ".join(self.buffer.frames)
+            raise BagtoolsError(f"frame '{self.options.frame}' is not in the tf tree (frames: {known})", bag.path)
+
+    def _base_frame(self, bag: BagReader) -> str | None:
+        """The robot base frame: --base-frame, else /odom's child frame, else base_footprint/base_link in tf."""
+        if self.options.base_frame:
+            return self.options.base_frame
+        if "/odom" in bag.topics and bag.topics["/odom"].msgtype in ODOMETRY_TYPES:
+            first = next(bag.messages(["/odom"]), None)
+            if first is not None:
+                child = decode_odometry(first.msg).child_frame_id.lstrip("/")
+                if child:
+                    return child
+        return next((f for f in BASE_FRAME_CANDIDATES if self.buffer.has_frame(f)), None)
+
+    def _pose_source(self, bag: BagReader) -> ScanPoseSource:
+        opts = self.options
+        if opts.poses_kind == POSES_TF:
+            self.base_frame = self._base_frame(bag)
+            return TfScanPoses(self.buffer, opts.frame, self.base_frame)
+        if opts.poses_kind == POSES_GROUND_TRUTH:
+            truth = read_ground_truth(bag)
+            if truth is None:
+                raise BagtoolsError("--poses ground-truth needs a /ground_truth topic (written by bagtools simulate)",
+                                    bag.path)
+            stamps, T_map_base, self.base_frame = truth
+            return TrajectoryScanPoses(stamps, T_map_base, opts.frame, self.base_frame, self.buffer)
+        trajectory = read_tum(opts.poses)
+        base = self._base_frame(bag)
+        if base is None:
+            raise BagtoolsError("cannot tell which robot frame the trajectory describes: give --base-frame", opts.poses)
+        self.base_frame = base
+        return TrajectoryScanPoses(trajectory.stamps_ns, trajectory.poses, opts.frame, base, self.buffer)
+
+    def _map_scans(self, bag: BagReader) -> OccupancyGrid:
+        for chunk in iter_posed_scan_chunks(bag, self.options.topic, self.poses):
+            usable = [(item, ranges) for item in chunk if (ranges := self._usable_ranges(item)) is not None]
+            if usable:
+                grid = self._cover([item for item, _ in usable], bag.path)
+            for item, ranges in usable:
+                self._insert(grid, item, ranges)
+        if self.grid is None or self.scans_used == 0:
+            raise BagtoolsError(self._nothing_posed_message(), bag.path)
+        if self.returns_used == 0:
+            raise BagtoolsError(
+                f"no scan on {self.options.topic} has a return within its range limits (all NaN, infinite or out of "
+                f"range in {self.scans_total} scans), so there is no obstacle to map", bag.path)
+        return self.grid
+
+    def _usable_ranges(self, item: PosedScan) -> np.ndarray | None:
+        """Count the scan; its ranges (see :meth:`_ranges`) if it can be inserted, else None (counted by reason)."""
+        self.scans_total += 1
+        self.scan_frames.add(item.scan.frame_id)
+        if item.skip_reason:
+            self.skipped[item.skip_reason] += 1
+            return None
+        if not math.isfinite(self._max_range(item)):
+            self.skipped[SKIP_NO_MAX_RANGE] += 1
+            return None
+        ranges = self._ranges(item)
+        if np.isnan(ranges).all():
+            self.skipped[SKIP_NO_VALID_RANGES] += 1
+            return None
+        return ranges
+
+    def _max_range(self, item: PosedScan) -> float:
+        scan_max = item.scan.range_max_m
+        limit = self.options.max_range_m
+        if not (math.isfinite(scan_max) and scan_max > 0):
+            return limit if limit is not None else math.nan
+        return scan_max if limit is None else min(scan_max, limit)
+
+    def _ranges(self, item: PosedScan) -> np.ndarray:
+        """Ranges (N,) float64 with the beams that carry no information set to NaN (see the module docstring)."""
+        scan = item.scan
+        r = scan.ranges_m.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            ignore = r < scan.range_min_m
+            if math.isfinite(scan.range_max_m) and scan.range_max_m > 0:
+                ignore |= np.isfinite(r) & (r > scan.range_max_m)
+        r[ignore] = np.nan
+        return r
+
+    def _cover(self, chunk: list[PosedScan], bag_path: str | Path) -> OccupancyGrid:
+        """Make the grid cover every scan position of ``chunk`` +- its maximum range, within the cell limit."""
+        xy = np.array([item.T_frame_scan[:2, 3] for item in chunk])
+        reach = np.array([self._max_range(item) for item in chunk])
+        lo = (xy - reach[:, None]).min(axis=0)
+        hi = (xy + reach[:, None]).max(axis=0)
+        res = self.options.resolution
+        if self.grid is not None:
+            lo = np.minimum(lo, [self.grid.x_world_limits[0], self.grid.y_world_limits[0]])
+            hi = np.maximum(hi, [self.grid.x_world_limits[1], self.grid.y_world_limits[1]])
+        lo_cells, hi_cells = np.floor(lo * res), np.ceil(hi * res)
+        cols, rows = (hi_cells - lo_cells).astype(float)
+        if cols * rows > self.options.max_cells:
+            width, height = (hi - lo)
+            raise BagtoolsError(
+                f"the map would span {width:.0f} m x {height:.0f} m, {cols * rows:.3g} cells at {res:g} cells/m, "
+                f"more than the limit of {self.options.max_cells:.3g}: check the poses (--poses, --frame) or lower "
+                "--resolution", bag_path)
+        if self.grid is None:
+            self.grid = OccupancyGrid(cols / res, rows / res, res, lo_cells / res)
+        else:
+            self.grid.grow_to_include(np.array([lo, hi]))
+        return self.grid
+
+    def _insert(self, grid: OccupancyGrid, item: PosedScan, ranges: np.ndarray) -> None:
+        scan, T = item.scan, item.T_frame_scan
+        max_range = self._max_range(item)
+        keep = ~np.isnan(ranges)
+        ranges, angles = ranges[keep], scan.angles_rad[keep]
+        # each beam's direction in the map frame, projected on the map plane: exact for any
+        # rotation of the scan frame about z, including a scanner mounted upside down
+        cos_a, sin_a = np.cos(angles), np.sin(angles)
+        world_angles = np.arctan2(T[1, 0] * cos_a + T[1, 1] * sin_a, T[0, 0] * cos_a + T[0, 1] * sin_a)
+        grid.insert_ray(np.array([T[0, 3], T[1, 3], 0.0]), ranges, world_angles, max_range)
+        returns = int(np.count_nonzero(ranges < max_range))
+        self.scans_used += 1
+        self.beams_used += int(ranges.size)
+        self.returns_used += returns
+        self.scans_without_returns += returns == 0
+        self.max_ranges_m.add(round(max_range, 6))
+        self._path.append(T[:2, 3].copy())
+        self._scan_z.append(float(T[2, 3]))
+
+    def _nothing_posed_message(self) -> str:
+        topic, frame = self.options.topic, self.options.frame
+        if self.scans_total == 0:
+            return f"topic {topic} holds no scans"
+        reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.most_common())
+        scan_frames = ", ".join(sorted(self.scan_frames))
+        known = ", ".join(self.buffer.frames) or "none"
+        return (f"none of the {self.scans_total} scans on {topic} could be used in frame '{frame}' ({reasons}); "
+                f"scan frame {scan_frames}, tf frames: {known}")
+
+    def _evaluate(self, bag: BagReader, grid: OccupancyGrid) -> dict:
+        """For a simulated bag: the map against the true world rasterized at the map's cells.
+
+        Scored over the cells in view, those the map observed (free or occupied):
+        walls the robot never saw (behind obstacles, out of range) are not held
+        against the map, a wall cell it crossed with free beams (drift, or a wall
+        missed) is. Precision is over every occupied cell of the map against
+        the whole truth. Occupied cells count within one cell (see
+        :func:`bagtools.grid.score_map`). The counts of true cells in the whole
+        grid are reported beside, to show how much of the world was in view.
+
+        A map in another frame than map (odom, say) is first placed where that frame
+        really was, anchored at the first ground-truth pose at which the pose source
+        knows the robot (see :func:`bagtools.simtruth.anchor_frame_in_map`), so the
+        score measures the drift within the map, not the frame's arbitrary origin.
+        """
+        world = load_sim_world(bag)
+        if world is None:
+            return {}
+        result: dict = {}
+        T_map_frame = np.eye(4)
+        if self.options.frame != "map":
+            truth = read_ground_truth(bag)
+            if truth is None:
+                return {}
+            stamps, T_map_base, base = truth
+            T_frame_base, reasons = self.poses.lookup(base, stamps)
+            anchor = anchor_frame_in_map(T_map_base, T_frame_base, reasons == "")
+            if anchor is None:
+                return {}
+            T_map_frame, first = anchor
+            result["truth_anchor"] = {"frame": self.options.frame, "robot_frame": base, "stamp_ns": int(stamps[first])}
+        R, t = T_map_frame[:2, :2], T_map_frame[:2, 3]
+        scanner_z = float(np.median(self._scan_z)) + float(T_map_frame[2, 3])
+
+        def in_map(xy: np.ndarray) -> np.ndarray:
+            return xy @ R.T + t
+
+        truly_occupied, truly_free = rasterize_truth(
+            grid,
+            lambda xy: world.surface_distance_2d_m(in_map(xy), z_m=scanner_z),
+            lambda xy: world.clearance_m(in_map(xy)),
+        )
+        classes = grid.occupancy_matrix("ternary")
+        in_view = classes != -1
+        score = score_map(classes, truly_occupied & in_view, truly_free & in_view, tolerance_cells=SCORE_TOLERANCE_CELLS)
+        # precision asks whether each occupied cell is near a true wall, seen or not
+        whole = score_map(classes, truly_occupied, truly_free, tolerance_cells=SCORE_TOLERANCE_CELLS)
+        result["accuracy_vs_truth"] = {
+            **score.to_dict(),
+            "occupied_precision": whole.to_dict()["occupied_precision"],
+            "true_occupied_cells_in_grid": int(truly_occupied.sum()),
+            "true_free_cells_in_grid": int(truly_free.sum()),
+            "scanner_height_m": round(scanner_z, 4),
+        }
+        return result
+
+    def _summary(self, grid: OccupancyGrid) -> dict:
+        rows, cols = grid.grid_size
+        x0, y0 = grid.grid_location_in_world
+        classes = grid.occupancy_matrix("ternary")
+        return {
+            "bag": str(self.bag_path),
+            "topic": self.options.topic,
+            "frame": self.options.frame,
+            "poses": self.options.poses,
+            "base_frame": getattr(self, "base_frame", None),
+            "scan_frames": sorted(self.scan_frames),
+            "scans_total": self.scans_total,
+            "scans_used": self.scans_used,
+            "scans_skipped": dict(self.skipped),
+            "scans_without_returns": self.scans_without_returns,
+            "beams_used": self.beams_used,
+            "returns_used": self.returns_used,
+            "max_range_m": sorted(self.max_ranges_m),
+            "grid": {
+                "rows": rows, "cols": cols, "resolution_cells_per_m": grid.resolution,
+                "cell_size_m": grid.cell_size_m, "origin_xy_m": [float(x0), float(y0)],
+                "occupied_cells": int(np.count_nonzero(classes == 1)),
+                "free_cells": int(np.count_nonzero(classes == 0)),
+            },
+            "options": asdict(self.options),
+            "warnings": self.warnings,
+        }

@@ -1,0 +1,184 @@
+"""Where each scan was taken: the scan frame's pose in the map's frame, batched over scan stamps.
+
+Two kinds of source, one interface (:class:`ScanPoseSource`):
+
+- :class:`TfScanPoses`: the bag's tf, ``T_frame_scan`` looked up at the scan stamps;
+- :class:`TrajectoryScanPoses`: a trajectory of the robot base in the frame
+  (``/ground_truth`` or a TUM file), interpolated at the scan stamps as tf does
+  (it is held in its own :class:`~bagtools.tf.TfBuffer`), composed with the bag's
+  base -> scan transform.
+
+A scan frame the bag's tf does not know (a real TurtleBot3 bag has no
+base_link -> base_scan transform) is taken to be the base frame, with the
+warning :data:`NO_SCAN_TRANSFORM_WARNING`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Protocol
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from bagtools.errors import BagtoolsError
+from bagtools.io import TfArrays
+from bagtools.tf import TfBuffer, TransformException
+from bagtools.transforms import quat2xyzw, tform2quat
+
+NO_SCAN_TRANSFORM_WARNING = "no transform from {base} to {scan_frame} in the bag; assuming the scan frame is the base frame"
+
+REASON_UNKNOWN_FRAME = "scan frame not in tf"
+REASON_NOT_CONNECTED = "frames not connected"
+REASON_BEFORE = "before pose data"
+REASON_AFTER = "after pose data"
+REASON_NO_POSE = "no pose at stamp"
+
+
+SPIKE_WINDOW = 7
+"""Samples in the running median that :func:`drop_translation_spikes` compares each sample with."""
+SPIKE_SPEED_MPS = 100.0
+"""A sample farther from the running median than this speed times the window's time span is a spike."""
+SPIKE_MIN_M = 1.0
+"""... and farther than this, so that dense samples do not make the test touchy."""
+
+
+def drop_translation_spikes(dynamic: TfArrays, window: int = SPIKE_WINDOW, speed_mps: float = SPIKE_SPEED_MPS,
+                            min_jump_m: float = SPIKE_MIN_M) -> tuple[TfArrays, Counter[tuple[str, str]]]:
+    """Drop the dynamic transforms whose translation leaps away from its neighbours and back (corrupt samples).
+
+    Per (parent, child) edge in stamp order, a sample is dropped when its distance
+    to the running median of ``window`` samples exceeds both ``min_jump_m`` and
+    ``speed_mps`` times the window's time span. A median follows steps (a
+    localizer's map -> odom correction), so only isolated leaps of up to
+    ``window // 2`` samples are dropped, e.g. the 1e32 m odometry values a real
+    TurtleBot3 bag holds. Returns the kept transforms and the drop count per edge.
+    """
+    keep = np.ones(len(dynamic), dtype=bool)
+    dropped: Counter[tuple[str, str]] = Counter()
+    if len(dynamic) < 3:
+        return dynamic, dropped
+    parents, parent_id = np.unique(dynamic.parent.astype(str), return_inverse=True)
+    children, child_id = np.unique(dynamic.child.astype(str), return_inverse=True)
+    edges = parent_id.astype(np.int64) * children.size + child_id
+    half = window // 2
+    for edge in np.unique(edges):
+        rows = np.flatnonzero(edges == edge)
+        rows = rows[np.argsort(dynamic.stamp_ns[rows], kind="stable")]
+        if rows.size < 3:
+            continue
+        xyz = dynamic.translation[rows]
+        with np.errstate(invalid="ignore", over="ignore"):
+            median = median_filter(xyz, size=(window, 1), mode="nearest")
+            deviation = np.linalg.norm(xyz - median, axis=1)
+        stamps = dynamic.stamp_ns[rows]
+        k = np.arange(rows.size)
+        span_s = (stamps[np.minimum(k + half, rows.size - 1)] - stamps[np.maximum(k - half, 0)]) / 1e9
+        spike = deviation > np.maximum(min_jump_m, speed_mps * span_s)
+        if spike.any():
+            keep[rows[spike]] = False
+            dropped[(str(parents[edge // children.size]), str(children[edge % children.size]))] += int(spike.sum())
+    if keep.all():
+        return dynamic, dropped
+    return TfArrays(dynamic.parent[keep], dynamic.child[keep], dynamic.stamp_ns[keep],
+                    dynamic.translation[keep], dynamic.rotation_xyzw[keep]), dropped
+
+
+class ScanPoseSource(Protocol):
+    """Poses of a body frame in the map's frame at arrays of stamps."""
+
+    frame: str
+    warnings: list[str]
+
+    def lookup(self, body_frame: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T_frame_body (N,4,4), reasons (N,) object array: '' where the pose is known, else why not)."""
+        ...
+
+
+def _reasons_by_span(valid: np.ndarray, stamps_ns: np.ndarray, span: tuple[int, int] | None) -> np.ndarray:
+    """'' where valid; otherwise before/after the span of the pose data, or 'no pose at stamp'."""
+    reasons = np.full(stamps_ns.shape, "", dtype=object)
+    bad = ~valid
+    if not bad.any():
+        return reasons
+    reasons[bad] = REASON_NO_POSE
+    if span is not None:
+        reasons[bad & (stamps_ns < span[0])] = REASON_BEFORE
+        reasons[bad & (stamps_ns > span[1])] = REASON_AFTER
+    return reasons
+
+
+def _tf_lookup(buffer: TfBuffer, target: str, source: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """T_target_source (N,4,4) at ``stamps_ns`` and the reasons (see :class:`ScanPoseSource`); never raises for tf failures."""
+    n = stamps_ns.size
+    if not (buffer.has_frame(target) and buffer.has_frame(source)):
+        return np.full((n, 4, 4), np.nan), np.full(n, REASON_UNKNOWN_FRAME, dtype=object)
+    try:
+        span = buffer.time_range(target, source)
+    except TransformException:
+        return np.full((n, 4, 4), np.nan), np.full(n, REASON_NOT_CONNECTED, dtype=object)
+    T, valid = buffer.lookup(target, source, stamps_ns, return_mask=True)
+    return T, _reasons_by_span(valid, stamps_ns, span)
+
+
+class TfScanPoses:
+    """Scan poses from the bag's tf: T_frame_scan = lookup(frame, scan frame, stamp).
+
+    When the scan frame is not in tf, ``base_frame`` stands in for it (warned once per frame).
+    """
+
+    def __init__(self, buffer: TfBuffer, frame: str, base_frame: str | None) -> None:
+        self.buffer = buffer
+        self.frame = frame
+        self.base_frame = base_frame
+        self.warnings: list[str] = []
+
+    def lookup(self, body_frame: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        source = body_frame
+        if not self.buffer.has_frame(body_frame) and self.base_frame and self.buffer.has_frame(self.base_frame):
+            _warn_once(self.warnings, NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=body_frame))
+            source = self.base_frame
+        return _tf_lookup(self.buffer, self.frame, source, np.asarray(stamps_ns, dtype=np.int64))
+
+
+class TrajectoryScanPoses:
+    """Scan poses from a base trajectory in ``frame``, composed with the bag's base -> scan transform.
+
+    Args:
+        stamps_ns: (N,) int ns of the trajectory samples.
+        T_frame_base: (N,4,4) poses of ``base_frame`` in ``frame``.
+        frame, base_frame: frame ids (they must differ).
+        buffer: the bag's tf, for T_base_scan (may be empty: the scan frame is then the base).
+    """
+
+    def __init__(self, stamps_ns: np.ndarray, T_frame_base: np.ndarray, frame: str, base_frame: str,
+                 buffer: TfBuffer) -> None:
+        if frame == base_frame:
+            raise BagtoolsError(f"the trajectory's base frame must differ from --frame, both are {frame!r}")
+        self.frame = frame
+        self.base_frame = base_frame
+        self.buffer = buffer
+        self.warnings: list[str] = []
+        T_frame_base = np.asarray(T_frame_base, dtype=np.float64)
+        self._trajectory = TfBuffer()
+        self._trajectory.set_transform(frame, base_frame, np.asarray(stamps_ns, dtype=np.int64),
+                                       T_frame_base[:, :3, 3], quat2xyzw(tform2quat(T_frame_base)))
+        self.span = self._trajectory.time_range(frame, base_frame)
+
+    def lookup(self, body_frame: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        T_frame_base, valid = self._trajectory.lookup(self.frame, self.base_frame, stamps_ns, return_mask=True)
+        reasons = _reasons_by_span(valid, stamps_ns, self.span)
+        if body_frame == self.base_frame:
+            return T_frame_base, reasons
+        if not (self.buffer.has_frame(body_frame) and self.buffer.has_frame(self.base_frame)):
+            _warn_once(self.warnings, NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=body_frame))
+            return T_frame_base, reasons
+        T_base_body, body_reasons = _tf_lookup(self.buffer, self.base_frame, body_frame, stamps_ns)
+        reasons = np.where(reasons == "", body_reasons, reasons)
+        return T_frame_base @ T_base_body, reasons
+
+
+def _warn_once(warnings: list[str], text: str) -> None:
+    if text not in warnings:
+        warnings.append(text)

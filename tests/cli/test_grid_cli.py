@@ -1,0 +1,157 @@
+"""``bagtools grid``: outputs in nav2 format, --force, help, and every bad input as one line with exit status 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagtools.cli import main
+from bagtools.grid import read_nav2_map
+from bagtools.gridmap import GRID_MAP_FILES
+from tests.conftest import FIXTURES, make_scan, make_tf, write_bag
+
+S = 1_000_000_000
+T0 = 1_700_000_000 * S
+SIM_BAG = FIXTURES / "sim_random_nocloud_20s"
+
+
+def run(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    out = capsys.readouterr()
+    return exit_info.value.code, out.out, out.err
+
+
+def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bagtools: "), err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+
+
+def test_help_has_an_example(capsys) -> None:
+    code, out, _ = run(["grid", "--help"], capsys)
+    assert code == 0
+    assert "Example:" in out and "bagtools grid out/sim --out out/grid" in out
+    assert "--poses" in out and "--max-range" in out and "--resolution" in out
+
+
+def test_writes_a_nav2_map_png_and_summary(tmp_path: Path, capsys) -> None:
+    out_dir = tmp_path / "grid"
+    code, out, err = run(["grid", str(SIM_BAG), "--out", str(out_dir), "--poses", "ground-truth"], capsys)
+    assert code == 0, err
+    assert "101 of 101 scans mapped" in out and "vs true world: occupied precision 1.000" in out
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(GRID_MAP_FILES)
+    summary = json.loads((out_dir / "summary.json").read_text())
+    yaml_text = (out_dir / "map.yaml").read_text()
+    for line in ("image: map.pgm", "mode: trinary", "resolution: 0.05", "negate: 0", "occupied_thresh: 0.65",
+                 "free_thresh: 0.196"):
+        assert line in yaml_text.splitlines()
+    nav2 = read_nav2_map(out_dir / "map.yaml")
+    grid = summary["grid"]
+    assert nav2.pixels.shape == (grid["rows"], grid["cols"])
+    assert set(np.unique(nav2.pixels)) == {0, 205, 254}
+    assert nav2.origin == (*grid["origin_xy_m"], 0.0) and nav2.resolution_m == 0.05
+    assert int((nav2.ternary() == 1).sum()) == grid["occupied_cells"]
+    assert int((nav2.ternary() == 0).sum()) == grid["free_cells"]
+    assert (out_dir / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert summary["accuracy_vs_truth"]["occupied_recall"] >= 0.9
+
+
+def test_refuses_to_overwrite_without_force(tmp_path: Path, capsys) -> None:
+    out_dir = tmp_path / "grid"
+    assert run(["grid", str(SIM_BAG), "--out", str(out_dir)], capsys)[0] == 0
+    before = {p.name: p.read_bytes() for p in out_dir.iterdir()}
+    code, _, err = run(["grid", str(SIM_BAG), "--out", str(out_dir), "--resolution", "10"], capsys)
+    assert_one_line_error(code, err, "already exists (use --force to overwrite)")
+    assert {p.name: p.read_bytes() for p in out_dir.iterdir()} == before
+    code, out, _ = run(["grid", str(SIM_BAG), "--out", str(out_dir), "--resolution", "10", "--force"], capsys)
+    assert code == 0 and "of 0.1 m" in out
+    assert read_nav2_map(out_dir / "map.yaml").resolution_m == 0.1
+
+
+def _odom_only_bag(path: Path, ranges: np.ndarray | None = None, scans: bool = True) -> Path:
+    """odom -> base_link and base_link -> base_scan, 2 s; scans with ``ranges`` (default: a 1 m circle)."""
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", T0, make_tf(T0, "base_link", "base_scan", (0, 0, 0.1), (0, 0, 0, 1)))]
+    for i in range(11):
+        t = T0 + i * S // 5
+        msgs.append(("/tf", "tf2_msgs/msg/TFMessage", t, make_tf(t, "odom", "base_link", (0.01 * i, 0, 0), (0, 0, 0, 1))))
+        if scans and 0 < i < 10:
+            r = np.full(360, 1.0, dtype=np.float32) if ranges is None else ranges
+            msgs.append(("/scan", "sensor_msgs/msg/LaserScan", t, make_scan(t, r)))
+    return write_bag(path, msgs)
+
+
+@pytest.mark.parametrize(
+    ("make", "args", "fragments"),
+    [
+        (lambda p: _odom_only_bag(p, scans=False), [], ["no topic '/scan' in the bag (topics: /tf, /tf_static)"]),
+        (lambda p: _odom_only_bag(p), [], ["frame 'map' is not in the tf tree (frames: base_link, base_scan, odom)"]),
+        (lambda p: _odom_only_bag(p), ["--frame", "world"], ["frame 'world' is not in the tf tree"]),
+        (lambda p: _odom_only_bag(p, np.full(360, np.nan, dtype=np.float32)), ["--frame", "odom"],
+         ["none of the 9 scans on /scan could be used in frame 'odom' (9 no valid ranges)"]),
+        (lambda p: _odom_only_bag(p, np.full(360, np.inf, dtype=np.float32)), ["--frame", "odom"],
+         ["no scan on /scan has a return within its range limits"]),
+        (lambda p: _odom_only_bag(p), ["--poses", "ground-truth"], ["--poses ground-truth needs a /ground_truth topic"]),
+        (lambda p: _odom_only_bag(p), ["--frame", "odom", "--topic", "/tf"],
+         ["topic '/tf' has type tf2_msgs/msg/TFMessage, expected sensor_msgs/msg/LaserScan"]),
+        (lambda p: p / "missing_bag", [], ["missing_bag"]),
+    ],
+    ids=["no-scan-topic", "no-map-frame", "unknown-frame", "all-nan", "all-inf", "no-ground-truth", "not-a-scan-topic",
+         "missing-bag"],
+)
+def test_bad_bags(tmp_path: Path, capsys, make, args: list[str], fragments: list[str]) -> None:
+    bag = make(tmp_path / "bag")
+    out_dir = tmp_path / "out"
+    code, _, err = run(["grid", str(bag), "--out", str(out_dir), *args], capsys)
+    assert_one_line_error(code, err, *fragments)
+    assert not out_dir.exists()
+
+
+def test_scans_outside_the_tf_data_say_why(tmp_path: Path, capsys) -> None:
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", T0, make_tf(T0, "odom", "base_scan", (0, 0, 0), (0, 0, 0, 1))),
+            ("/tf", "tf2_msgs/msg/TFMessage", T0 + S, make_tf(T0 + S, "odom", "base_scan", (0, 0, 0), (0, 0, 0, 1)))]
+    for i in range(3):
+        t = T0 + (5 + i) * S
+        msgs.append(("/scan", "sensor_msgs/msg/LaserScan", t, make_scan(t, np.full(360, 1.0, dtype=np.float32))))
+    bag = write_bag(tmp_path / "late", msgs)
+    code, _, err = run(["grid", str(bag), "--out", str(tmp_path / "o"), "--frame", "odom"], capsys)
+    assert_one_line_error(code, err, "none of the 3 scans on /scan could be used in frame 'odom' (3 after pose data)",
+                          "scan frame base_scan, tf frames: base_scan, odom")
+
+
+@pytest.mark.parametrize(
+    ("args", "fragments"),
+    [
+        (["--resolution", "0"], ["--resolution must be a positive number of cells per metre, got 0.0"]),
+        (["--max-range", "-1"], ["--max-range must be a positive number of metres, got -1.0"]),
+        (["--poses", "ground-truth", "--frame", "odom"], ["--poses ground-truth gives poses in the map frame"]),
+        (["--poses", "nowhere.tum"], ["nowhere.tum: no such trajectory file"]),
+    ],
+    ids=["resolution", "max-range", "ground-truth-frame", "missing-tum"],
+)
+def test_bad_options(tmp_path: Path, capsys, args: list[str], fragments: list[str]) -> None:
+    code, _, err = run(["grid", str(SIM_BAG), "--out", str(tmp_path / "o"), *args], capsys)
+    assert_one_line_error(code, err, *fragments)
+
+
+def test_bad_tum_file(tmp_path: Path, capsys) -> None:
+    tum = tmp_path / "bad.tum"
+    tum.write_text("1700000000.0 1 2 3\n")
+    code, _, err = run(["grid", str(SIM_BAG), "--out", str(tmp_path / "o"), "--poses", str(tum)], capsys)
+    assert_one_line_error(code, err, "bad.tum: line 1: expected 8 values")
+
+
+def test_real_turtlebot3_bag_warns_about_the_scan_frame(real_dir: Path, tmp_path: Path, capsys) -> None:
+    bag = real_dir / "turtlebot3_real_lidar_odom.bag"
+    code, out, err = run(["grid", str(bag), "--out", str(tmp_path / "o"), "--frame", "odom"], capsys)
+    assert code == 0, err
+    assert ("bagtools: warning: no transform from base_link to base_scan in the bag; "
+            "assuming the scan frame is the base frame") in err.splitlines()
+    assert "scans mapped" in out
+    assert read_nav2_map(tmp_path / "o" / "map.yaml").ternary().max() == 1
