@@ -24,6 +24,7 @@ from bagtools.errors import BagtoolsError
 from bagtools.io import BagReader, TfCollector, open_bag
 from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
+from bagtools.tf.repair import drop_translation_spikes
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
 
 StampMode = Literal["message", "latest"]
@@ -96,9 +97,9 @@ class CloudMapPipeline:
     def run(self) -> CloudMapResult:
         with open_bag(self.bag_path) as bag:
             bag.require_topic(self.options.topic)
+            self.warnings = list(bag.warnings)
             self._load_tf(bag)
             self._map_clouds(bag)
-            self.warnings = list(bag.warnings)
             points = self.accumulator.points()
             summary = self._summary(points)
             summary.update(self._evaluate(bag, points))
@@ -112,8 +113,11 @@ class CloudMapPipeline:
         for rec in bag.messages([t for t in collector.topics if t in bag.topics]):
             collector.add(rec)
         dynamic, static = collector.arrays()
-        self.buffer = TfBuffer.from_arrays(dynamic, static)
-        self._arrival = _ArrivalIndex(dynamic, collector.dynamic_arrival_ns())
+        arrival_ns = collector.dynamic_arrival_ns()
+        dynamic, kept = drop_translation_spikes(dynamic, self.warnings)
+        arrival_ns = arrival_ns[kept]
+        self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
+        self._arrival = _ArrivalIndex(dynamic, arrival_ns)
         if not self.buffer.frames:
             raise BagtoolsError("bag has no /tf or /tf_static data, so clouds cannot be placed in a frame", bag.path)
         if not self.buffer.has_frame(self.options.frame):

@@ -39,7 +39,8 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
-from bagtools.gridmap.poses import ScanPoseSource, drop_translation_spikes, TfScanPoses, TrajectoryScanPoses
+from bagtools.gridmap.poses import ScanPoseSource, TfScanPoses, TrajectoryScanPoses
+from bagtools.tf.repair import drop_translation_spikes
 from bagtools.gridmap.scans import PosedScan, iter_posed_scan_chunks
 from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, decode_odometry, open_bag, read_tf_arrays
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
@@ -98,10 +99,7 @@ class GridMapPipeline:
 
     def _load_tf(self, bag: BagReader) -> None:
         dynamic, static = read_tf_arrays(bag)
-        dynamic, dropped = drop_translation_spikes(dynamic)
-        for (parent, child), count in dropped.items():
-            self.warnings.append(f"dropped {count} corrupt /tf samples {parent} -> {child} "
-                                 "(translation leaping away from its neighbours and back)")
+        dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         if self.options.poses_kind != POSES_TF:
             return

@@ -15,18 +15,16 @@ warning :data:`NO_SCAN_TRANSFORM_WARNING`.
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import Protocol
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from bagtools.errors import BagtoolsError
 from bagtools.io import TfArrays
 from bagtools.tf import TfBuffer, TransformException
+from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING
 from bagtools.transforms import quat2xyzw, tform2quat
 
-NO_SCAN_TRANSFORM_WARNING = "no transform from {base} to {scan_frame} in the bag; assuming the scan frame is the base frame"
 
 REASON_UNKNOWN_FRAME = "scan frame not in tf"
 REASON_NOT_CONNECTED = "frames not connected"
@@ -35,53 +33,6 @@ REASON_AFTER = "after pose data"
 REASON_NO_POSE = "no pose at stamp"
 
 
-SPIKE_WINDOW = 7
-"""Samples in the running median that :func:`drop_translation_spikes` compares each sample with."""
-SPIKE_SPEED_MPS = 100.0
-"""A sample farther from the running median than this speed times the window's time span is a spike."""
-SPIKE_MIN_M = 1.0
-"""... and farther than this, so that dense samples do not make the test touchy."""
-
-
-def drop_translation_spikes(dynamic: TfArrays, window: int = SPIKE_WINDOW, speed_mps: float = SPIKE_SPEED_MPS,
-                            min_jump_m: float = SPIKE_MIN_M) -> tuple[TfArrays, Counter[tuple[str, str]]]:
-    """Drop the dynamic transforms whose translation leaps away from its neighbours and back (corrupt samples).
-
-    Per (parent, child) edge in stamp order, a sample is dropped when its distance
-    to the running median of ``window`` samples exceeds both ``min_jump_m`` and
-    ``speed_mps`` times the window's time span. A median follows steps (a
-    localizer's map -> odom correction), so only isolated leaps of up to
-    ``window // 2`` samples are dropped, e.g. the 1e32 m odometry values a real
-    TurtleBot3 bag holds. Returns the kept transforms and the drop count per edge.
-    """
-    keep = np.ones(len(dynamic), dtype=bool)
-    dropped: Counter[tuple[str, str]] = Counter()
-    if len(dynamic) < 3:
-        return dynamic, dropped
-    parents, parent_id = np.unique(dynamic.parent.astype(str), return_inverse=True)
-    children, child_id = np.unique(dynamic.child.astype(str), return_inverse=True)
-    edges = parent_id.astype(np.int64) * children.size + child_id
-    half = window // 2
-    for edge in np.unique(edges):
-        rows = np.flatnonzero(edges == edge)
-        rows = rows[np.argsort(dynamic.stamp_ns[rows], kind="stable")]
-        if rows.size < 3:
-            continue
-        xyz = dynamic.translation[rows]
-        with np.errstate(invalid="ignore", over="ignore"):
-            median = median_filter(xyz, size=(window, 1), mode="nearest")
-            deviation = np.linalg.norm(xyz - median, axis=1)
-        stamps = dynamic.stamp_ns[rows]
-        k = np.arange(rows.size)
-        span_s = (stamps[np.minimum(k + half, rows.size - 1)] - stamps[np.maximum(k - half, 0)]) / 1e9
-        spike = deviation > np.maximum(min_jump_m, speed_mps * span_s)
-        if spike.any():
-            keep[rows[spike]] = False
-            dropped[(str(parents[edge // children.size]), str(children[edge % children.size]))] += int(spike.sum())
-    if keep.all():
-        return dynamic, dropped
-    return TfArrays(dynamic.parent[keep], dynamic.child[keep], dynamic.stamp_ns[keep],
-                    dynamic.translation[keep], dynamic.rotation_xyzw[keep]), dropped
 
 
 class ScanPoseSource(Protocol):

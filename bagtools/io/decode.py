@@ -195,6 +195,11 @@ class TfArrays:
             np.empty((0, 3)), np.empty((0, 4)),
         )
 
+    def select(self, rows: np.ndarray) -> TfArrays:
+        """The transforms at ``rows`` (a bool mask or an index array)."""
+        return TfArrays(self.parent[rows], self.child[rows], self.stamp_ns[rows], self.translation[rows],
+                        self.rotation_xyzw[rows])
+
     @staticmethod
     def concatenate(parts: Iterable[TfArrays]) -> TfArrays:
         """Join several TfArrays end to end."""

@@ -49,7 +49,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from bagtools.errors import BagtoolsError
 from bagtools.io import (
@@ -59,15 +58,13 @@ from bagtools.ndt import MIN_SCAN_POINTS, NdtReference, match_scans
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
+from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes
 from bagtools.trajectory import Trajectory, ape_translation, rpe_translation
 from bagtools.transforms import pose2tform, tform2pose
 
 INIT_MODES = ("odom", "constant-velocity", "zero")
 REFERENCE_MODES = ("previous", "keyframe")
 ODOM_TOPIC = "/odom"
-#: An odometry sample farther than this (m) from the median of the ODOMETRY_MEDIAN_WINDOW around it is a glitch.
-ODOMETRY_GLITCH_M = 1.0
-ODOMETRY_MEDIAN_WINDOW = 9
 
 
 @dataclass(frozen=True)
@@ -226,7 +223,7 @@ class NdtOdomPipeline:
             edge = (parents == self.odom_frame) & (children == self.base_frame)
             if edge.any():
                 self.odometry_source = f"/tf {self.odom_frame} -> {self.base_frame}"
-                dynamic = self._drop_odometry_glitches(dynamic, edge)
+                dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
             elif odom_samples:
                 n = len(odom_samples)
                 dynamic = TfArrays.concatenate([dynamic, TfArrays(
@@ -234,33 +231,11 @@ class NdtOdomPipeline:
                     np.array([s.stamp_ns for s in odom_samples], dtype=np.int64),
                     np.array([s.position_m for s in odom_samples]), np.array([s.orientation_xyzw for s in odom_samples]))])
                 self.odometry_source = f"{ODOM_TOPIC} ({self.odom_frame} -> {self.base_frame})"
-                edge = np.zeros(len(dynamic), dtype=bool)
-                edge[-n:] = True
-                dynamic = self._drop_odometry_glitches(dynamic, edge)
+                dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
         try:
             self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         except BagtoolsError as err:
             raise BagtoolsError(f"the bag's tf data cannot be used: {err.problem}", bag.path) from err
-
-    def _drop_odometry_glitches(self, dynamic: TfArrays, edge: np.ndarray) -> TfArrays:
-        """Drop odometry samples lying more than ODOMETRY_GLITCH_M from the running median of their neighbours.
-
-        Real robots' serial links sometimes corrupt a message (positions of 1e22 m);
-        one such sample would throw every later pose away.
-        """
-        rows = np.flatnonzero(edge)
-        rows = rows[np.argsort(dynamic.stamp_ns[rows], kind="stable")]
-        xyz = dynamic.translation[rows]
-        median = median_filter(xyz, size=(ODOMETRY_MEDIAN_WINDOW, 1), mode="nearest")
-        bad = ~(np.linalg.norm(np.nan_to_num(xyz - median, nan=np.inf), axis=1) <= ODOMETRY_GLITCH_M)
-        if not bad.any():
-            return dynamic
-        self.warnings.append(f"dropped {int(bad.sum())} odometry sample(s) {self.odom_frame} -> {self.base_frame} "
-                             f"lying more than {ODOMETRY_GLITCH_M:g} m from their neighbours (corrupt messages)")
-        keep = np.ones(len(dynamic), dtype=bool)
-        keep[rows[bad]] = False
-        return TfArrays(dynamic.parent[keep], dynamic.child[keep], dynamic.stamp_ns[keep], dynamic.translation[keep],
-                        dynamic.rotation_xyzw[keep])
 
     def _read_scans(self, bag: BagReader) -> tuple[np.ndarray, list[np.ndarray]]:
         """Stamps (N,) int64 and valid points (M_k,2) of the usable scans, in bag order."""
@@ -304,9 +279,8 @@ class NdtOdomPipeline:
                 return
             except TransformException:
                 continue
-        self.warnings.append(f"no transform {self.base_frame} -> {self.scan_frame} in the bag's tf: assuming the laser "
-                             f"sits at the origin of {self.base_frame} (identity); give --scan-frame-offset X,Y,YAW "
-                             "to set it")
+        self.warnings.append(NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=self.scan_frame)
+                             + " (give --scan-frame-offset X,Y,YAW to set it)")
 
     def _has_odometry(self) -> bool:
         return self.odometry_source is not None

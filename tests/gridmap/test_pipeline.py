@@ -10,7 +10,6 @@ import pytest
 
 from bagtools.errors import BagtoolsError
 from bagtools.gridmap import NO_SCAN_TRANSFORM_WARNING, GridMapOptions, GridMapPipeline
-from bagtools.gridmap.poses import drop_translation_spikes
 from bagtools.io import TfArrays, open_bag
 from bagtools.simtruth import anchor_frame_in_map, read_ground_truth
 from bagtools.trajectory import Trajectory, write_tum
@@ -183,21 +182,6 @@ def test_scan_frame_missing_from_tf_is_taken_as_the_base(tmp_path: Path) -> None
     assert result.summary["base_frame"] == "base_link"
     assert NO_SCAN_TRANSFORM_WARNING.format(base="base_link", scan_frame="laser") in result.summary["warnings"]
     np.testing.assert_allclose(result.scan_path_xy, [[X0, Y0]] * 5)
-
-
-def test_drop_translation_spikes() -> None:
-    n = 50
-    stamps = T0 + np.arange(n, dtype=np.int64) * S // 10
-    xyz = np.column_stack([np.arange(n) * 0.02, np.zeros(n), np.zeros(n)])
-    xyz[30:, 1] += 0.5                     # a localizer step: kept
-    xyz[10, 1] = 1.9e32                    # a corrupt sample: dropped
-    xyz[20:22, 0] = 5.9e22                 # two in a row: dropped
-    q = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
-    arrays = TfArrays(np.array(["odom"] * n, dtype=object), np.array(["base_link"] * n, dtype=object), stamps, xyz, q)
-    kept, dropped = drop_translation_spikes(arrays)
-    assert dropped == {("odom", "base_link"): 3}
-    assert len(kept) == n - 3 and np.abs(kept.translation).max() < 2.0
-    assert set(kept.stamp_ns) == set(stamps) - {stamps[10], stamps[20], stamps[21]}
 
 
 def test_real_turtlebot3_bag_in_odom(real_dir: Path) -> None:
