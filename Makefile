@@ -34,6 +34,8 @@ demo: setup
 	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map --voxel 0.02 --sample 0.2 --force
 	$(BAGTOOLS) map-cloud $(OUT)/turtlebot3_sim --out $(OUT)/cloud_map_odom --frame odom --voxel 0.02 --sample 0.2 --force
 	$(BAGTOOLS) ndt-odom $(OUT)/turtlebot3_sim --out $(OUT)/ndt_odom --force
+	$(BAGTOOLS) grid $(OUT)/turtlebot3_sim --out $(OUT)/grid --force
+	$(BAGTOOLS) grid $(OUT)/turtlebot3_sim --out $(OUT)/grid_ndt --poses $(OUT)/ndt_odom/trajectory.tum --frame odom --force
 	@echo "demo outputs are under $(OUT)/"
 
 test: setup

@@ -391,6 +391,24 @@ class OccupancyGrid:
         window += delta.reshape(height, width)[::-1]
         np.clip(window, self._l_min, self._l_max, out=window)
 
+    def cropped(self, margin_cells: int = 10) -> OccupancyGrid:
+        """A copy cut down to the observed cells (log-odds != 0) plus ``margin_cells`` of unknown around them.
+
+        Cells keep their world positions. A grid with no observed cell is returned whole.
+        """
+        observed = self._log_odds != 0
+        if not observed.any():
+            return self.copy()
+        rows_any, cols_any = np.flatnonzero(observed.any(axis=1)), np.flatnonzero(observed.any(axis=0))
+        rows, cols = self._log_odds.shape
+        top, bottom = max(0, rows_any[0] - margin_cells), min(rows, rows_any[-1] + 1 + margin_cells)
+        left, right = max(0, cols_any[0] - margin_cells), min(cols, cols_any[-1] + 1 + margin_cells)
+        other = self.copy()
+        other._log_odds = self._log_odds[top:bottom, left:right].copy()
+        other._off_col = self._off_col + left
+        other._off_row = self._off_row + (rows - bottom)
+        return other
+
     def copy(self) -> OccupancyGrid:
         """An independent copy."""
         other = object.__new__(OccupancyGrid)

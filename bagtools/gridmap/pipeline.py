@@ -154,7 +154,8 @@ class GridMapPipeline:
             raise BagtoolsError(
                 f"no scan on {self.options.topic} has a return within its range limits (all NaN, infinite or out of "
                 f"range in {self.scans_total} scans), so there is no obstacle to map", bag.path)
-        return self.grid
+        # The grid grew to every scan's reach; keep what was seen and a 10-cell unknown border.
+        return self.grid.cropped(margin_cells=10)
 
     def _usable_ranges(self, item: PosedScan) -> np.ndarray | None:
         """Count the scan; its ranges (see :meth:`_ranges`) if it can be inserted, else None (counted by reason)."""
@@ -320,7 +321,7 @@ class GridMapPipeline:
             "max_range_m": sorted(self.max_ranges_m),
             "grid": {
                 "rows": rows, "cols": cols, "resolution_cells_per_m": grid.resolution,
-                "cell_size_m": grid.cell_size_m, "origin_xy_m": [float(x0), float(y0)],
+                "cell_size_m": grid.cell_size_m, "origin_xy_m": [round(float(x0), 9) + 0.0, round(float(y0), 9) + 0.0],
                 "occupied_cells": int(np.count_nonzero(classes == 1)),
                 "free_cells": int(np.count_nonzero(classes == 0)),
             },

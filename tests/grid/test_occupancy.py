@@ -250,3 +250,17 @@ def test_log_odds_view_is_read_only():
     grid = grid_10cm()
     with pytest.raises(ValueError):
         grid.log_odds[0, 0] = 1.0
+
+
+def test_cropped_keeps_cells_in_place_and_drops_unknown_margin() -> None:
+    grid = OccupancyGrid(10.0, 8.0, 20, (-5.0, -4.0))
+    grid.insert_ray((1.0, 0.5, 0.0), np.array([1.0, 2.0]), np.array([0.0, np.pi / 2]), 5.0)
+    small = grid.cropped(margin_cells=3)
+    assert small.grid_size[0] < grid.grid_size[0] and small.grid_size[1] < grid.grid_size[1]
+    probe = np.array([[2.0, 0.5], [1.0, 2.5], [1.0, 1.0], [1.5, 0.5]])
+    np.testing.assert_array_equal(small.get_occupancy(probe), grid.get_occupancy(probe))
+    observed = grid.log_odds != 0
+    assert int((small.log_odds != 0).sum()) == int(observed.sum())
+    rows, cols = np.nonzero(small.log_odds != 0)
+    assert rows.min() == 3 and cols.min() == 3
+    assert rows.max() == small.grid_size[0] - 4 and cols.max() == small.grid_size[1] - 4
