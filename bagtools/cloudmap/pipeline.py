@@ -24,7 +24,7 @@ from bagtools.errors import BagtoolsError
 from bagtools.io import BagReader, TfCollector, open_bag
 from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
-from bagtools.tf.repair import drop_translation_spikes
+from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
 
 StampMode = Literal["message", "latest"]
@@ -100,6 +100,10 @@ class CloudMapPipeline:
             self.warnings = list(bag.warnings)
             self._load_tf(bag)
             self._map_clouds(bag)
+            if self.clouds_used == 0:
+                reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.items()) or "no messages"
+                raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
+                                    f"({reasons}), so there is no map to write", bag.path)
             points = self.accumulator.points()
             summary = self._summary(points)
             summary.update(self._evaluate(bag, points))
@@ -118,6 +122,7 @@ class CloudMapPipeline:
         arrival_ns = arrival_ns[kept]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         self._arrival = _ArrivalIndex(dynamic, arrival_ns)
+        self.base_frame = guess_base_frame(bag, set(self.buffer.frames))
         if not self.buffer.frames:
             raise BagtoolsError("bag has no /tf or /tf_static data, so clouds cannot be placed in a frame", bag.path)
         if not self.buffer.has_frame(self.options.frame):
@@ -125,8 +130,17 @@ class CloudMapPipeline:
             raise BagtoolsError(f"frame '{self.options.frame}' is not in the tf tree (frames: {known})", bag.path)
 
     def _pose(self, sensor_frame: str, stamp_ns: int, log_time_ns: int) -> np.ndarray:
-        """T_frame_sensor for one message, by the chosen stamp policy (raises TransformException)."""
+        """T_frame_sensor for one message, by the chosen stamp policy (raises TransformException).
+
+        A sensor frame the bag's tf lacks is taken to be the robot base frame, with a warning.
+        """
         target = self.options.frame
+        sensor_frame = sensor_frame.lstrip("/")
+        if not self.buffer.has_frame(sensor_frame) and self.base_frame and self.buffer.has_frame(self.base_frame):
+            warning = NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=sensor_frame)
+            if warning not in self.warnings:
+                self.warnings.append(warning)
+            sensor_frame = self.base_frame
         if self.options.stamp == "latest":
             chain = self.buffer.chain_edges(target, sensor_frame)
             stamp_ns = self._arrival.latest_common_stamp(chain, log_time_ns)

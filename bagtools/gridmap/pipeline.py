@@ -40,16 +40,15 @@ from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
 from bagtools.gridmap.poses import ScanPoseSource, TfScanPoses, TrajectoryScanPoses
-from bagtools.tf.repair import drop_translation_spikes
+from bagtools.tf.repair import drop_translation_spikes, guess_base_frame
 from bagtools.gridmap.scans import PosedScan, iter_posed_scan_chunks
-from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, decode_odometry, open_bag, read_tf_arrays
+from bagtools.io import LASERSCAN_TYPES, BagReader, open_bag, read_tf_arrays
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import TfBuffer
 from bagtools.trajectory import read_tum
 
 SKIP_NO_VALID_RANGES = "no valid ranges"
 SKIP_NO_MAX_RANGE = "range_max not positive (give --max-range)"
-BASE_FRAME_CANDIDATES = ("base_footprint", "base_link")
 SCORE_TOLERANCE_CELLS = 1
 
 
@@ -112,15 +111,7 @@ class GridMapPipeline:
 
     def _base_frame(self, bag: BagReader) -> str | None:
         """The robot base frame: --base-frame, else /odom's child frame, else base_footprint/base_link in tf."""
-        if self.options.base_frame:
-            return self.options.base_frame
-        if "/odom" in bag.topics and bag.topics["/odom"].msgtype in ODOMETRY_TYPES:
-            first = next(bag.messages(["/odom"]), None)
-            if first is not None:
-                child = decode_odometry(first.msg).child_frame_id.lstrip("/")
-                if child:
-                    return child
-        return next((f for f in BASE_FRAME_CANDIDATES if self.buffer.has_frame(f)), None)
+        return guess_base_frame(bag, set(self.buffer.frames), self.options.base_frame)
 
     def _pose_source(self, bag: BagReader) -> ScanPoseSource:
         opts = self.options

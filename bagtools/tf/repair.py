@@ -15,7 +15,10 @@ from collections import Counter
 import numpy as np
 from scipy.ndimage import median_filter
 
-from bagtools.io import TfArrays
+from bagtools.io import ODOMETRY_TYPES, BagReader, TfArrays, decode_odometry
+
+BASE_FRAME_CANDIDATES = ("base_footprint", "base_link")
+"""Conventional robot base frames (REP 105), tried when nothing else names the base."""
 
 NO_SCAN_TRANSFORM_WARNING = "no transform from {base} to {scan_frame} in the bag; assuming the scan frame is the base frame"
 
@@ -77,3 +80,19 @@ def drop_translation_spikes(dynamic: TfArrays, warnings: list[str]) -> tuple[TfA
         warnings.append(f"dropped {count} corrupt /tf samples {parent} -> {child} "
                         "(translation leaping away from its neighbours and back)")
     return (dynamic if keep.all() else dynamic.select(keep)), keep
+
+
+def guess_base_frame(bag: BagReader, known_frames: set[str] | list[str], explicit: str | None = None) -> str | None:
+    """The robot base frame: ``explicit``, else /odom's child frame, else base_footprint/base_link if known.
+
+    Stands in for a sensor frame the bag's tf lacks (see :data:`NO_SCAN_TRANSFORM_WARNING`).
+    """
+    if explicit:
+        return explicit
+    if "/odom" in bag.topics and bag.topics["/odom"].msgtype in ODOMETRY_TYPES:
+        first = next(bag.messages(["/odom"]), None)
+        if first is not None:
+            child = decode_odometry(first.msg).child_frame_id.lstrip("/")
+            if child:
+                return child
+    return next((f for f in BASE_FRAME_CANDIDATES if f in known_frames), None)

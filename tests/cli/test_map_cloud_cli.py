@@ -83,3 +83,27 @@ def test_failure_while_writing_leaves_nothing(tmp_path: Path, monkeypatch) -> No
 def test_help_has_examples() -> None:
     result = run("--help")
     assert result.returncode == 0 and "Example:" in result.stdout and "bagtools map-cloud" in result.stdout
+
+
+def test_no_cloud_placeable_is_an_error(tmp_path: Path) -> None:
+    from tests.conftest import make_tf
+
+    t0 = 10**18
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", t0 + i * 10**8, make_tf(t0 + i * 10**8, "map", "camera", (i, 0, 0), (0, 0, 0, 1)))
+            for i in range(5)]
+    msgs.append(("/camera/depth/points", "sensor_msgs/msg/PointCloud2", t0 + 5 * 10**9,
+                 make_cloud(t0 + 5 * 10**9, np.ones((10, 3)))))
+    bag = write_bag(tmp_path / "late", msgs)
+    result = run(str(bag), "--out", str(tmp_path / "out"))
+    assert result.returncode == 2 and result.stderr.count("\n") == 1
+    assert "no cloud on /camera/depth/points could be placed in frame 'map' (1 outside tf data)" in result.stderr
+
+
+def test_real_scans_without_laser_mount(real_dir: Path, tmp_path: Path) -> None:
+    result = run(str(real_dir / "turtlebot3_real_lidar_odom.bag"), "--topic", "/scan", "--frame", "odom",
+                 "--sample", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert "no transform from base_link to base_scan in the bag; assuming the scan frame is the base frame" in result.stderr
+    assert "dropped 8 corrupt /tf samples odom -> base_link" in result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["clouds_used"] >= 289 and summary["points_out"] > 10_000
