@@ -107,3 +107,23 @@ def test_real_scans_without_laser_mount(real_dir: Path, tmp_path: Path) -> None:
     assert "dropped 8 corrupt /tf samples odom -> base_link" in result.stderr
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["clouds_used"] >= 289 and summary["points_out"] > 10_000
+
+
+def test_empty_and_all_nan_clouds_are_counted(tmp_path: Path) -> None:
+    from tests.conftest import make_tf
+
+    t0 = 10**18
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", t0 + i * 10**8, make_tf(t0 + i * 10**8, "map", "camera", (0, 0, 0), (0, 0, 0, 1)))
+            for i in range(30)]
+    msgs.append(("/camera/depth/points", "sensor_msgs/msg/PointCloud2", t0 + 10**9, make_cloud(t0 + 10**9, np.empty((0, 3)))))
+    msgs.append(("/camera/depth/points", "sensor_msgs/msg/PointCloud2", t0 + 2 * 10**9,
+                 make_cloud(t0 + 2 * 10**9, np.full((4, 3), np.nan))))
+    msgs.append(("/camera/depth/points", "sensor_msgs/msg/PointCloud2", t0 + 2 * 10**9 + 1,
+                 make_cloud(t0 + 2 * 10**9, np.ones((100, 3)))))
+    msgs.sort(key=lambda m: m[2])
+    bag = write_bag(tmp_path / "empty", msgs)
+    result = run(str(bag), "--out", str(tmp_path / "out"), "--sample", "1")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["clouds_used"] == 1 and summary["clouds_skipped"] == {"empty cloud": 2}
+    assert summary["points_out"] == 100
