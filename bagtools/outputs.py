@@ -59,6 +59,15 @@ def write_text_atomic(path: str | Path, text: str, force: bool = False) -> Path:
     return write_bytes_atomic(path, text.encode("utf-8"), force)
 
 
+def check_outputs(out_dir: str | Path, names: list[str], force: bool) -> None:
+    """Raise before any work is done if ``out_dir`` cannot take ``names`` (not a directory, or files exist without force)."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise BagtoolsError("is not a directory", out_dir)
+    for name in names:
+        check_writable(out_dir / name, force)
+
+
 class OutputDir:
     """Stage a command's output files and publish them together.
 
@@ -81,10 +90,7 @@ class OutputDir:
         self._tmp: Path | None = None
 
     def __enter__(self) -> Path:
-        if self.out_dir.exists() and not self.out_dir.is_dir():
-            raise BagtoolsError("is not a directory", self.out_dir)
-        for name in self.names:
-            check_writable(self.out_dir / name, self.force)
+        check_outputs(self.out_dir, self.names, self.force)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self._tmp = Path(tempfile.mkdtemp(prefix=".bagtools-", suffix=".tmp", dir=self.out_dir))
         return self._tmp

@@ -36,7 +36,10 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str, resolution:
       bagtools grid out/sim --out out/grid_odom --frame odom --force
       bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum --frame odom
     """
-    from bagtools.gridmap import GridMapOptions, GridMapPipeline, write_grid_map
+    from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
+    from bagtools.outputs import check_outputs
+
+    check_outputs(out_dir, GRID_MAP_FILES, force)  # fail before the work, not after it
 
     options = GridMapOptions(topic=topic, frame=frame, poses=poses, resolution=resolution, max_range_m=max_range,
                              base_frame=base_frame)

@@ -46,7 +46,10 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: st
       bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --reference previous
     """
     from bagtools.errors import BagtoolsError
-    from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+    from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+    from bagtools.outputs import check_outputs
+
+    check_outputs(out_dir, NDT_ODOM_FILES, force)  # fail before the work, not after it
 
     options = NdtOdomOptions(topic=topic, init=init, reference=reference, cell_size_m=cell_size, min_score=min_score,
                              scan_frame_offset=scan_frame_offset)
