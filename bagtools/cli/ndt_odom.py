@@ -24,13 +24,15 @@ def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tu
 @click.option("--reference", type=click.Choice(["previous", "keyframe"]), default="keyframe", show_default=True,
               help="Match against the previous scan, or a keyframe replaced after 0.5 m, 20 deg or a falling score.")
 @click.option("--cell-size", type=float, default=0.5, show_default=True, help="NDT cell side [m].")
+@click.option("--cell-model", type=click.Choice(["widened", "paper"]), default="widened", show_default=True,
+              help="NDT cell covariances: widened along walls (less drift) or as in Biber and Strasser's paper.")
 @click.option("--min-score", type=float, default=0.1, show_default=True,
               help="Normalized NDT score in [0, 1] below which a match falls back to its initial guess.")
 @click.option("--scan-frame-offset", callback=_offset, default=None, metavar="X,Y,YAW",
               help="Laser pose on the robot base [m, m, rad] when tf lacks (or has a wrong) base -> laser transform.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: str, cell_size: float, min_score: float,
-             scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
+def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: str, cell_size: float, cell_model: str,
+             min_score: float, scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
     """Laser odometry of BAG: match its scans in order by 2D NDT and chain the motions.
 
     Writes OUT/trajectory.tum (the robot base in the odometry frame, TUM format
@@ -51,7 +53,8 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: st
 
     check_outputs(out_dir, NDT_ODOM_FILES, force)  # fail before the work, not after it
 
-    options = NdtOdomOptions(topic=topic, init=init, reference=reference, cell_size_m=cell_size, min_score=min_score,
+    options = NdtOdomOptions(topic=topic, init=init, reference=reference, cell_size_m=cell_size, cell_model=cell_model,
+                             min_score=min_score,
                              scan_frame_offset=scan_frame_offset)
     result = NdtOdomPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):

@@ -27,13 +27,13 @@ Reference: ``previous`` matches each scan against the one before it;
 ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from it, or the match
 score falls below ``keyframe_score_ratio`` of the first score against it.
 
-Defaults, measured with bagtools simulate (lap, realistic odometry noise; APE
-rmse of NDT vs wheel odometry): ``--reference keyframe`` with 0.5 m cells gives
-0.9 cm vs 6.9 cm on a 60 s lap and 1.7 cm vs 16.2 cm on a 120 s lap; 1 m cells
-give 2.0 cm and 3.7 cm (keyframe after 0.5 m), so 0.5 m is the default cell
-size. ``--reference previous`` drifts more (10 cm and 12 cm at 1 m cells): the
-matcher's small per-pair bias (about 2 mm sideways per 5 cm driven) adds up
-over every scan, while a keyframe is matched against about ten times less often.
+Defaults, measured with bagtools simulate (60 s lap, realistic odometry noise;
+APE rmse, wheel odometry 6.9 cm): ``--reference keyframe`` with 0.5 m cells and
+the widened cell model gives 0.5 cm (1 m cells: 1.9 cm); ``--reference
+previous`` 4.2 cm (1 m cells: 3.1 cm), since every scan adds its small matching
+error while a keyframe is matched against about ten times less often. With the
+paper's cell model the per-pair sideways bias (about 2 mm per 5 cm driven)
+makes ``previous`` drift to about 10 cm, worse than the wheels.
 
 Score: the NDT score divided by its maximum, 4 x the current scan's points (each
 point contributes at most 1 per grid), so it is in [0, 1] whatever the beam
@@ -55,6 +55,7 @@ from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, TfArrays, TfCollector, decode_laserscan, decode_odometry, open_bag,
 )
 from bagtools.ndt import MIN_SCAN_POINTS, NdtReference, match_scans
+from bagtools.ndt.grid import CELL_MODELS
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
@@ -73,7 +74,8 @@ class NdtOdomOptions:
 
     ``init``: 'odom', 'constant-velocity' or 'zero', or None for odom when the
     bag has odometry and constant velocity otherwise. ``cell_size_m``: NDT cell
-    side (m). ``min_score``: normalized score in [0, 1] below which a match
+    side (m). ``cell_model``: 'widened' (default: far less drift when chaining,
+    see :mod:`bagtools.ndt.grid`) or 'paper'. ``min_score``: normalized score in [0, 1] below which a match
     falls back to its initial guess. ``scan_frame_offset``: (x m, y m, yaw rad)
     of the laser on the robot base, overriding (or standing in for) tf.
     """
@@ -82,6 +84,7 @@ class NdtOdomOptions:
     init: str | None = None
     reference: str = "keyframe"
     cell_size_m: float = 0.5
+    cell_model: str = "widened"
     min_score: float = 0.1
     keyframe_distance_m: float = 0.5
     keyframe_angle_rad: float = 0.35
@@ -96,6 +99,8 @@ class NdtOdomOptions:
             raise BagtoolsError(f"--reference must be one of {', '.join(REFERENCE_MODES)}, got {self.reference!r}")
         if not (np.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise BagtoolsError(f"--cell-size must be a positive number of metres, got {self.cell_size_m}")
+        if self.cell_model not in CELL_MODELS:
+            raise BagtoolsError(f"--cell-model must be one of {', '.join(CELL_MODELS)}, got {self.cell_model!r}")
         if not 0.0 <= self.min_score <= 1.0:
             raise BagtoolsError(f"--min-score must be in [0, 1] (a normalized NDT score), got {self.min_score}")
         if self.keyframe_distance_m <= 0 or self.keyframe_angle_rad <= 0 or not 0 <= self.keyframe_score_ratio <= 1:
@@ -331,7 +336,7 @@ class NdtOdomPipeline:
             odom_valid = valid[:-1] & valid[1:]
         pairs: list[tuple[float, float, bool, str]] = []
         ref_index = 0
-        reference = NdtReference.from_points(points[0], opts.cell_size_m) if n > 1 else None
+        reference = NdtReference.from_points(points[0], opts.cell_size_m, opts.cell_model) if n > 1 else None
         ref_first_score: float | None = None
         for k in progress(range(1, n), total=n - 1, desc="matching", unit="scan"):
             guess = self._guess(k, stamps, W, init, odom_motion, odom_valid)
@@ -352,7 +357,7 @@ class NdtOdomPipeline:
                                  or score < opts.keyframe_score_ratio * ref_first_score)
             if new_reference and k + 1 < n:
                 ref_index, ref_first_score = k, None
-                reference = NdtReference.from_points(points[k], opts.cell_size_m)
+                reference = NdtReference.from_points(points[k], opts.cell_size_m, opts.cell_model)
             reason = ("" if not fallback else result.reason if result.score <= 0.0
                       else f"normalized score below {opts.min_score:g}")
             pairs.append((time.perf_counter() - t0, score, fallback, reason))
