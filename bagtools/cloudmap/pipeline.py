@@ -114,8 +114,7 @@ class CloudMapPipeline:
     def _load_tf(self, bag: BagReader) -> None:
         collector = TfCollector()
         collector.check(bag)
-        for rec in bag.messages([t for t in collector.topics if t in bag.topics]):
-            collector.add(rec)
+        collector.read(bag)
         dynamic, static = collector.arrays()
         arrival_ns = collector.dynamic_arrival_ns()
         dynamic, kept = drop_translation_spikes(dynamic, self.warnings)

@@ -6,6 +6,7 @@ import numpy as np
 
 from bagtools.io.decode import TF_TYPES, TfArrays, decode_tf_message
 from bagtools.io.reader import BagReader, Record
+from bagtools.progress import progress
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -35,6 +36,13 @@ class TfCollector:
             if topic in bag.topics:
                 bag.require_topic(topic, TF_TYPES)
 
+    def read(self, bag: BagReader) -> None:
+        """Read every message of the tf topics the bag has (with a progress bar)."""
+        present = [t for t in self.topics if t in bag.topics]
+        total = sum(bag.topics[t].count for t in present)
+        for rec in progress(bag.messages(present), total=total, desc="reading tf", unit="msg"):
+            self.add(rec)
+
     def add(self, rec: Record) -> None:
         """Decode a record of one of the tf topics (others are ignored)."""
         if rec.topic == self.static_topic:
@@ -61,6 +69,5 @@ def read_tf_arrays(bag: BagReader, tf_topic: str = TF_TOPIC, static_topic: str =
     """
     collector = TfCollector(tf_topic, static_topic)
     collector.check(bag)
-    for rec in bag.messages([t for t in collector.topics if t in bag.topics]):
-        collector.add(rec)
+    collector.read(bag)
     return collector.arrays()
