@@ -14,12 +14,13 @@ import click
 @click.option("--frame", default="map", show_default=True, help="Fixed frame to build the map in.")
 @click.option("--stamp", type=click.Choice(["message", "latest"]), default="message", show_default=True,
               help="Pose at each message's header stamp, or the newest tf available when it arrived.")
-@click.option("--sample", type=float, default=0.01, show_default=True, help="Random fraction of each cloud to keep.")
+@click.option("--sample", type=float, default=None,
+              help="Random fraction of each cloud to keep.  [default: 0.01 of a PointCloud2, all of a LaserScan]")
 @click.option("--voxel", type=float, default=None, help="Voxel-downsample the map to this edge length [m].")
 @click.option("--max-range", type=float, default=None, help="Drop points farther than this from the sensor [m].")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random sampling.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample: float, voxel: float | None,
+def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample: float | None, voxel: float | None,
               max_range: float | None, seed: int, force: bool) -> None:
     """Build a point-cloud map of BAG in a fixed frame ("mapping with known poses").
 

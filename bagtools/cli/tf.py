@@ -41,6 +41,7 @@ def frames(bag: str, dot_file: str | None, force: bool) -> None:
     from bagtools.tf.tree import read_frame_tree
 
     tree = read_frame_tree(bag)
+    _warn(tree.warnings)
     if dot_file:
         write_text_atomic(dot_file, render_dot(tree.infos, tree.origin_ns), force)
     click.echo(tree.text())

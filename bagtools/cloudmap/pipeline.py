@@ -21,13 +21,16 @@ import numpy as np
 from bagtools.cloudmap.accumulator import PointAccumulator, random_subset
 from bagtools.cloudmap.sources import iter_sensor_points
 from bagtools.errors import BagtoolsError
-from bagtools.io import BagReader, TfCollector, open_bag
+from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
 from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
 
 StampMode = Literal["message", "latest"]
+
+DEFAULT_CLOUD_SAMPLE = 0.01
+"""Fraction of each PointCloud2 kept when no sample is given (a depth image holds thousands of points)."""
 
 
 @dataclass(frozen=True)
@@ -37,20 +40,21 @@ class CloudMapOptions:
     ``stamp``: 'message' looks each cloud's pose up at its header stamp
     (interpolated); 'latest' uses the newest transform that had arrived by the
     cloud's bag time, as a naive live subscriber would. ``sample`` keeps that
-    random fraction of each cloud (seeded); ``voxel_m`` downsamples the map;
+    random fraction of each cloud (seeded); None keeps DEFAULT_CLOUD_SAMPLE of
+    a PointCloud2 and every beam of a LaserScan; ``voxel_m`` downsamples the map;
     ``max_range_m`` drops points farther than that from the sensor.
     """
 
     topic: str = "/camera/depth/points"
     frame: str = "map"
     stamp: StampMode = "message"
-    sample: float = 0.01
+    sample: float | None = None
     voxel_m: float | None = None
     max_range_m: float | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.sample <= 1.0:
+        if self.sample is not None and not 0.0 < self.sample <= 1.0:
             raise BagtoolsError(f"--sample must be in (0, 1], got {self.sample}")
         if self.voxel_m is not None and self.voxel_m <= 0:
             raise BagtoolsError(f"--voxel must be positive, got {self.voxel_m}")
@@ -105,6 +109,10 @@ class CloudMapPipeline:
                 raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
                                     f"({reasons}), so there is no map to write", bag.path)
             points = self.accumulator.points()
+            if points.shape[0] == 0:
+                limit = f" within --max-range {self.options.max_range_m} m" if self.options.max_range_m is not None else ""
+                raise BagtoolsError(f"none of the {self.clouds_used} placed clouds on {self.options.topic} has a point"
+                                    f"{limit}, so there is no map to write", bag.path)
             summary = self._summary(points)
             summary.update(self._evaluate(bag, points))
         return CloudMapResult(points, np.array(self._sensor_path).reshape(-1, 3), summary)
@@ -148,6 +156,8 @@ class CloudMapPipeline:
     def _map_clouds(self, bag: BagReader) -> None:
         opts = self.options
         total = bag.topics[opts.topic].count
+        self.sample = opts.sample if opts.sample is not None else (
+            1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
         for item in progress(iter_sensor_points(bag, opts.topic), total=total, desc="mapping", unit="cloud"):
             self.sensor_frames.add(item.frame_id)
             self.points_in += item.points.shape[0]
@@ -162,7 +172,7 @@ class CloudMapPipeline:
             points = item.points
             if opts.max_range_m is not None:
                 points = points[np.einsum("ij,ij->i", points, points) <= opts.max_range_m**2]
-            points = random_subset(points, opts.sample, self.rng)
+            points = random_subset(points, self.sample, self.rng)
             R, t = T_frame_sensor[:3, :3], T_frame_sensor[:3, 3]
             self.accumulator.add((points.astype(np.float64) @ R.T + t).astype(np.float32))
             self._sensor_path.append(t.copy())
@@ -207,6 +217,7 @@ class CloudMapPipeline:
             "points_in": self.points_in,
             "points_accumulated": self.accumulator.points_added,
             "points_out": int(points.shape[0]),
+            "sample_fraction": self.sample,
             "options": asdict(self.options),
             "warnings": self.warnings,
         }

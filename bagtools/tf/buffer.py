@@ -217,15 +217,17 @@ class TfBuffer:
         """Load /tf and /tf_static of any bag (MCAP, rosbag2 sqlite3, ROS 1).
 
         Transforms tf2 would ignore (NaN, non-unit quaternion, empty frame id,
-        frame equal to its parent) are skipped and counted in ``warnings``.
+        frame equal to its parent) are skipped and counted in ``warnings``,
+        after the reader's own warnings (e.g. a truncated MCAP read up to the cut).
         Raises :class:`~bagtools.errors.BagError` if the bag cannot be read.
         """
         from bagtools.io import open_bag, read_tf_arrays
 
         with open_bag(path) as bag:
             dynamic, static = read_tf_arrays(bag)
-            source, span = bag.path, (bag.start_ns, bag.end_ns)
+            source, span, reader_warnings = bag.path, (bag.start_ns, bag.end_ns), list(bag.warnings)
         buffer = cls.from_arrays(dynamic, static, skip_invalid=True)
+        buffer.warnings[:0] = reader_warnings
         buffer.path = str(source)
         buffer.bag_span_ns = span
         return buffer

@@ -23,6 +23,7 @@ from bagtools.tf.sampling import sample_stamps
 
 POINT_TYPES = ("geometry_msgs/msg/PointStamped",)
 DEFAULT_TARGETS = ("map", "odom", "base_footprint")
+"""Default target frames; a bag without base_footprint gets base_link as the robot's frame instead."""
 OUTPUT_NAMES = ["point.csv", "point.png", "summary.json"]
 
 
@@ -57,6 +58,8 @@ def follow_points(buffer: TfBuffer, points: list[FixedPoint], targets: list[str]
     """
     if not points:
         raise BagtoolsError("no points to follow", buffer.path)
+    if not targets:
+        raise BagtoolsError("no target frames to express the points in (give --targets A,B,...)", buffer.path)
     first, last = None, None
     for point in points:
         for target in targets:
@@ -167,11 +170,12 @@ def read_clicked_points(bag: str | Path, topic: str) -> tuple[TfBuffer, list[Fix
                 points.append(FixedPoint(frame, (float(p.x), float(p.y), float(p.z)), stamp_to_ns(rec.msg.header.stamp)))
             else:
                 collector.add(rec)
-        span, path = (reader.start_ns, reader.end_ns), str(reader.path)
+        span, path, reader_warnings = (reader.start_ns, reader.end_ns), str(reader.path), list(reader.warnings)
     if not points:
         raise BagtoolsError(f"topic '{topic}' has no messages", path)
     buffer = TfBuffer.from_arrays(*collector.arrays(), skip_invalid=True)
     buffer.path, buffer.bag_span_ns = path, span
+    buffer.warnings[:0] = reader_warnings
     return buffer, points
 
 
@@ -181,7 +185,8 @@ def follow_point_bag(bag: str | Path, out_dir: str | Path, point: tuple[float, f
     """Follow ``point`` fixed in ``frame`` (or every clicked point of ``topic``) and write the outputs.
 
     Writes point.csv, point.png and summary.json into ``out_dir`` together.
-    ``targets`` None means the frames of DEFAULT_TARGETS the bag has. Returns
+    ``targets`` None means the frames of DEFAULT_TARGETS the bag has (base_link
+    standing in for a missing base_footprint). Returns
     the track and warnings about skipped transforms.
     """
     if (point is None) == (topic is None) or (point is not None and not frame):
@@ -193,6 +198,8 @@ def follow_point_bag(bag: str | Path, out_dir: str | Path, point: tuple[float, f
         points = [FixedPoint(frame, tuple(float(v) for v in point))]
     if targets is None:
         targets = [t for t in DEFAULT_TARGETS if buffer.has_frame(t)]
+        if "base_footprint" not in targets and buffer.has_frame("base_link"):
+            targets.append("base_link")
         if not targets:
             raise BagtoolsError(f"none of the default target frames {', '.join(DEFAULT_TARGETS)} is in the bag; "
                                 f"give --targets (frames: {', '.join(buffer.frames)})", buffer.path)

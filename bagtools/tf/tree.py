@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
@@ -15,11 +15,13 @@ class FrameTree:
     ``origin_ns`` is the earliest header stamp of a dynamic transform (the bag
     start if there is none): times are shown relative to it, since header
     stamps (e.g. simulation time) need not match the bag's recording clock.
+    ``warnings`` are the reader's (e.g. a truncated MCAP read up to the cut).
     """
 
     path: str
     origin_ns: int
     infos: list[FrameInfo]
+    warnings: list[str] = field(default_factory=list)
 
     def text(self) -> str:
         """The indented tree, times relative to ``origin_ns``."""
@@ -34,4 +36,4 @@ def read_frame_tree(bag: str | Path) -> FrameTree:
         dynamic, static = read_tf_arrays(reader)
         infos = frame_infos(dynamic, static)
         firsts = [f.first_ns for f in infos if not f.is_static]
-        return FrameTree(str(reader.path), min(firsts) if firsts else int(reader.start_ns), infos)
+        return FrameTree(str(reader.path), min(firsts) if firsts else int(reader.start_ns), infos, list(reader.warnings))

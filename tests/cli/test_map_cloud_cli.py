@@ -57,6 +57,7 @@ def _bag_without_tf(tmp_path: Path) -> Path:
     (lambda d: [str(d / "missing")], "no such file or directory"),
     (lambda d: [str(_bag_without_tf(d))], "no /tf or /tf_static data"),
     (lambda d: [str(FIXTURE), "--sample", "1.5"], "--sample must be in (0, 1]"),
+    (lambda d: [str(FIXTURE), "--max-range", "0.1"], "has a point within --max-range 0.1 m, so there is no map"),
 ])
 def test_bad_input_one_line_exit_2_and_no_output(tmp_path: Path, args, problem: str) -> None:
     out = tmp_path / "out"

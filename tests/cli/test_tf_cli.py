@@ -138,3 +138,34 @@ def test_frames_on_real_nav2_bag(real_dir: Path, capsys) -> None:
     lines = out.splitlines()
     assert lines[0] == "map" and "odom  (dynamic" in lines[1] and "base_link  (dynamic" in lines[2]
     assert sum("(static)" in line for line in lines) == 29
+
+
+def test_point_with_empty_targets_is_one_line_exit_2(drive_bag: Path, tmp_path: Path, capsys) -> None:
+    code, _, err = run(["tf", "point", str(drive_bag), "--out", str(tmp_path / "p"), "--point", "1", "2", "3",
+                        "--frame", "map", "--targets", ","], capsys)
+    assert code == 2 and err.count("\n") == 1 and "no target frames" in err
+    assert not (tmp_path / "p").exists()
+
+
+def test_point_default_targets_use_base_link_without_base_footprint(tmp_path: Path, capsys) -> None:
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", T0 + i * S // 10,
+             make_tf(T0 + i * S // 10, "odom", "base_link", (0.1 * i, 0, 0), (0, 0, 0, 1))) for i in range(11)]
+    bag = write_bag(tmp_path / "odom_base_link", msgs)
+    code, out, _ = run(["tf", "point", str(bag), "--out", str(tmp_path / "p"), "--point", "2", "0", "0",
+                        "--frame", "odom", "--rate", "1"], capsys)
+    assert code == 0 and "over 2 steps in odom, base_link" in out
+    summary = json.loads((tmp_path / "p" / "summary.json").read_text())
+    assert summary["targets"] == ["odom", "base_link"]
+    assert summary["points"][0]["in_targets"]["base_link"]["last_xyz_m"] == pytest.approx([1.0, 0.0, 0.0])
+
+
+def test_tf_commands_report_a_truncated_mcap(drive_bag: Path, tmp_path: Path, capsys) -> None:
+    data = next(drive_bag.glob("*.mcap")).read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    for argv in (["tf", "frames", str(cut)], ["tf", "echo", str(cut), "odom", "base_link"],
+                 ["tf", "point", str(cut), "--out", str(tmp_path / "p"), "--point", "1", "0", "0", "--frame", "odom"],
+                 ["tf", "point", str(cut), "--out", str(tmp_path / "c"), "--topic", "/clicked_point"]):
+        code, _, err = run(argv, capsys)
+        assert code == 0, argv
+        assert "warning: " in err and "truncated MCAP" in err and "recovered" in err, argv

@@ -114,3 +114,12 @@ def test_bad_options_and_inputs(tmp_path: Path) -> None:
         CloudMapPipeline(FIXTURE, CloudMapOptions(frame="world")).run()
     with pytest.raises(TopicError, match="has type nav_msgs/msg/Odometry"):
         CloudMapPipeline(FIXTURE, CloudMapOptions(topic="/odom")).run()
+
+
+def test_default_sample_keeps_every_beam_of_a_scan_and_a_fraction_of_a_cloud() -> None:
+    scans = CloudMapPipeline(FIXTURE, CloudMapOptions(topic="/scan", frame="odom")).run().summary
+    assert scans["sample_fraction"] == 1.0 and scans["options"]["sample"] is None
+    assert scans["points_accumulated"] > 0.9 * scans["points_in"]
+    clouds = CloudMapPipeline(FIXTURE, CloudMapOptions(frame="odom")).run().summary
+    assert clouds["sample_fraction"] == 0.01
+    assert clouds["points_accumulated"] == pytest.approx(0.01 * clouds["points_in"], rel=0.1)
