@@ -216,8 +216,10 @@ class TfBuffer:
     def from_bag(cls, path: str | Path) -> TfBuffer:
         """Load /tf and /tf_static of any bag (MCAP, rosbag2 sqlite3, ROS 1).
 
-        Transforms tf2 would ignore (NaN, non-unit quaternion, empty frame id,
-        frame equal to its parent) are skipped and counted in ``warnings``,
+        Corrupt samples (isolated translation leaps, as real odometry sometimes
+        records) are dropped, and transforms tf2 would ignore (NaN, non-unit
+        quaternion, empty frame id, frame equal to its parent) are skipped; both
+        are counted in ``warnings``,
         after the reader's own warnings (e.g. a truncated MCAP read up to the cut).
         Raises :class:`~bagtools.errors.BagError` if the bag cannot be read.
         """
@@ -226,21 +228,27 @@ class TfBuffer:
         with open_bag(path) as bag:
             dynamic, static = read_tf_arrays(bag)
             source, span, reader_warnings = bag.path, (bag.start_ns, bag.end_ns), list(bag.warnings)
-        buffer = cls.from_arrays(dynamic, static, skip_invalid=True)
+        buffer = cls.from_arrays(dynamic, static, skip_invalid=True, repair_spikes=True)
         buffer.warnings[:0] = reader_warnings
         buffer.path = str(source)
         buffer.bag_span_ns = span
         return buffer
 
     @classmethod
-    def from_arrays(cls, dynamic, static=None, skip_invalid: bool = False) -> TfBuffer:
+    def from_arrays(cls, dynamic, static=None, skip_invalid: bool = False, repair_spikes: bool = False) -> TfBuffer:
         """A buffer from :class:`~bagtools.io.TfArrays` of /tf (``dynamic``) and /tf_static (``static``).
 
         Statics are set first, then the dynamic transforms, so a frame published
         on both topics ends up dynamic. With ``skip_invalid`` bad transforms are
-        skipped (and counted in ``warnings``) instead of raising.
+        skipped (and counted in ``warnings``) instead of raising. With
+        ``repair_spikes`` corrupt samples of recorded data (isolated translation
+        leaps, see :mod:`bagtools.tf.repair`) are dropped first, with a warning.
         """
         buffer = cls()
+        if repair_spikes and dynamic is not None:
+            from bagtools.tf.repair import drop_translation_spikes
+
+            dynamic = drop_translation_spikes(dynamic, buffer.warnings)[0]
         for arrays, is_static in ((static, True), (dynamic, False)):
             if arrays is not None and len(arrays):
                 buffer._set(arrays.parent, arrays.child, arrays.stamp_ns, arrays.translation, arrays.rotation_xyzw,

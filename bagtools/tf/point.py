@@ -173,7 +173,7 @@ def read_clicked_points(bag: str | Path, topic: str) -> tuple[TfBuffer, list[Fix
         span, path, reader_warnings = (reader.start_ns, reader.end_ns), str(reader.path), list(reader.warnings)
     if not points:
         raise BagtoolsError(f"topic '{topic}' has no messages", path)
-    buffer = TfBuffer.from_arrays(*collector.arrays(), skip_invalid=True)
+    buffer = TfBuffer.from_arrays(*collector.arrays(), skip_invalid=True, repair_spikes=True)
     buffer.path, buffer.bag_span_ns = path, span
     buffer.warnings[:0] = reader_warnings
     return buffer, points
