@@ -63,6 +63,11 @@ class BagDescription:
         }
 
 
+def _seconds(stamp_ns: int) -> str:
+    """Exact seconds.nanoseconds of an int ns stamp (no float rounding)."""
+    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d}"
+
+
 def _iso(stamp_ns: int) -> str:
     return datetime.fromtimestamp(stamp_ns / 1e9, tz=UTC).isoformat(timespec="milliseconds")
 
@@ -94,8 +99,8 @@ def format_description(desc: BagDescription) -> str:
         f"path:       {desc.path}",
         f"format:     {desc.kind}",
         f"duration:   {desc.duration_s:.3f} s",
-        f"start:      {_iso(desc.start_ns)} ({desc.start_ns / 1e9:.3f})",
-        f"end:        {_iso(desc.end_ns)} ({desc.end_ns / 1e9:.3f})",
+        f"start:      {_iso(desc.start_ns)} ({_seconds(desc.start_ns)} s)",
+        f"end:        {_iso(desc.end_ns)} ({_seconds(desc.end_ns)} s)",
         f"messages:   {desc.message_count}",
         "",
     ]
