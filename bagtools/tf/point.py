@@ -127,27 +127,36 @@ def point_summary(track: PointTrack) -> dict:
 
 
 def plot_track(track: PointTrack, path: Path) -> None:
-    """x-y paths of every point, one subplot per target frame, written as PNG."""
+    """One column per target frame: the x-y path of every point (top) and its x, y over time (bottom), as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(track.targets), figsize=(4.5 * len(track.targets), 4.5), squeeze=False)
-    for ax, target in zip(axes[0], track.targets):
+    n = len(track.targets)
+    fig, axes = plt.subplots(2, n, figsize=(4.5 * n, 7.5), squeeze=False, gridspec_kw={"height_ratios": [3, 2]})
+    t_s = (track.stamp_ns - track.stamp_ns[0]) / 1e9
+    for column, target in enumerate(track.targets):
+        path_ax, time_ax = axes[0][column], axes[1][column]
         for k, point in enumerate(track.points):
-            xy = track.xyz[target][k][:, :2]
-            line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.2, label=f"point {k} ({point.frame})")
-            good = xy[~np.isnan(xy).any(axis=1)]
+            xyz = track.xyz[target][k]
+            line, = path_ax.plot(xyz[:, 0], xyz[:, 1], lw=1.2, label=f"point {k} ({point.frame})")
+            good = xyz[~np.isnan(xyz).any(axis=1)]
             if len(good):
-                ax.plot(*good[0], "o", color=line.get_color(), ms=5)
-                ax.plot(*good[-1], "s", color=line.get_color(), ms=5)
-        ax.set_title(f"in {target}  (o start, \u25a0 end)")
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.grid(True, alpha=0.3)
+                path_ax.plot(*good[0, :2], "o", color=line.get_color(), ms=5)
+                path_ax.plot(*good[-1, :2], "s", color=line.get_color(), ms=5)
+            time_ax.plot(t_s, xyz[:, 0], lw=1.0, color=line.get_color(), label=f"x, point {k}")
+            time_ax.plot(t_s, xyz[:, 1], lw=1.0, ls="--", color=line.get_color(), label=f"y, point {k}")
+        path_ax.set_title(f"in {target}  (o start, \u25a0 end)")
+        path_ax.set_xlabel(f"x in {target} [m]")
+        path_ax.set_ylabel(f"y in {target} [m]")
+        path_ax.set_aspect("equal", adjustable="datalim")
+        path_ax.grid(True, alpha=0.3)
+        time_ax.set_xlabel("time since first step [s]")
+        time_ax.set_ylabel(f"position in {target} [m]")
+        time_ax.grid(True, alpha=0.3)
     axes[0][0].legend(fontsize=7, loc="best")
+    axes[1][0].legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
