@@ -31,6 +31,7 @@ from simulate.robot.waffle import (
 from simulate.sensors import DepthCamera, Lidar
 from simulate.world import World, load_world
 from simulate.writer import ROS_DISTROS, MessageBuilder, SimBagWriter
+from bagtools.transforms import pose2tform
 
 ODOM_RATE_HZ = 30
 STEPS_PER_SCAN = 6  # 5 Hz scans at the 30 Hz odometry rate
@@ -146,12 +147,106 @@ def _latency_ns(rng: np.random.Generator, kind: str, n: int) -> np.ndarray:
     return np.round(rng.uniform(lo, hi, n) * 1e6).astype(np.int64)
 
 
-def _matrix_from_xyyaw(x: float, y: float, yaw: float, z: float = 0.0) -> np.ndarray:
-    T = np.eye(4)
-    c, s = np.cos(yaw), np.sin(yaw)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:3, 3] = (x, y, z)
-    return T
+class _BagSimulation:
+    """One bag's messages: when each is stamped and logged, and how it is built.
+
+    The random streams are drawn in a fixed order (AMCL estimates, clicks,
+    latencies, then scan and cloud noise in bag order), so the same
+    configuration gives the same bytes.
+    """
+
+    def __init__(self, config: SimConfig, world: World, traj: Trajectory, rngs: dict[str, np.random.Generator]) -> None:
+        self.config, self.world, self.traj, self.rngs = config, world, traj, rngs
+        motion, odom, step_ns = traj.motion, traj.odometry, traj.step_ns
+        self.t0 = config.start_time_ns
+        # Scans every 6th step; map->odom from the AMCL model at each scan.
+        self.scan_steps = np.arange(0, len(step_ns), STEPS_PER_SCAN)
+        self.scan_ns = step_ns[self.scan_steps]
+        self.amcl = amcl_map_to_odom(motion.poses[self.scan_steps], odom.poses[self.scan_steps], rngs["amcl"])
+        self.lidar = Lidar()
+        self.T_base_scan = T_base_footprint_frame("base_scan")
+        self.cloud_ns = np.zeros(0, dtype=np.int64)
+        if config.cloud:
+            self.camera = DepthCamera(width=config.cloud_size[0], height=config.cloud_size[1])
+            n_clouds = int(np.floor(config.duration_s * config.cloud_rate_hz + 1e-9)) + 1
+            cloud_ns = self.t0 + np.round(np.arange(n_clouds) * 1e9 / config.cloud_rate_hz).astype(np.int64)
+            self.cloud_ns = cloud_ns[cloud_ns <= step_ns[-1]]
+            self.cloud_poses = motion.pose_at_offset((self.cloud_ns - self.t0) / 1e9)
+            self.T_base_optical = T_base_footprint_frame("camera_rgb_optical_frame")
+        n_clicks = int(config.duration_s // CLICK_PERIOD_S)
+        self.click_ns = self.t0 + np.arange(1, n_clicks + 1, dtype=np.int64) * int(CLICK_PERIOD_S * 1e9)
+        self.click_points = _clicked_points(world, motion.pose_at_offset((self.click_ns - self.t0) / 1e9), rngs["click"])
+        self.world_json = json.dumps(
+            {"world": world.to_json(), "config": _config_json(config), "robot": "turtlebot3_waffle"}, sort_keys=True)
+        # Twists over the step that ended at each stamp.
+        self.v_true, self.w_true = _previous_step(motion.v_mps), _previous_step(motion.w_radps)
+        self.v_odom, self.w_odom = _previous_step(odom.v_mps), _previous_step(odom.w_radps)
+
+    @property
+    def topics(self) -> list[str]:
+        topics = [WORLD_TOPIC, "/tf_static", "/tf", "/odom", "/ground_truth", "/scan", "/clicked_point"]
+        return topics + [CLOUD_TOPIC] if self.config.cloud else topics
+
+    def schedule(self) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+        """(kinds, kind index, message index, log time ns) of every message, in bag (log-time) order."""
+        lat, step_ns = self.rngs["latency"], self.traj.step_ns
+        scan_log = self.scan_ns + _latency_ns(lat, "scan", len(self.scan_ns))
+        streams = [
+            ("world", np.array([self.t0])),
+            ("tf_static", np.array([self.t0])),
+            ("tf_odom", step_ns + _latency_ns(lat, "tf", len(step_ns))),
+            ("odom", step_ns + _latency_ns(lat, "odom", len(step_ns))),
+            ("truth", step_ns + _latency_ns(lat, "truth", len(step_ns))),
+            ("scan", scan_log),
+            ("tf_map", scan_log + _latency_ns(lat, "amcl", len(self.scan_ns))),
+            ("cloud", self.cloud_ns + _latency_ns(lat, "cloud", len(self.cloud_ns))),
+            ("click", self.click_ns + _latency_ns(lat, "click", len(self.click_ns))),
+        ]
+        log_ns = np.concatenate([times for _, times in streams])
+        kind = np.concatenate([np.full(len(times), i) for i, (_, times) in enumerate(streams)])
+        index = np.concatenate([np.arange(len(times)) for _, times in streams])
+        order = np.lexsort((index, kind, log_ns))
+        return [name for name, _ in streams], kind[order], index[order], log_ns[order]
+
+    def message(self, mb: MessageBuilder, name: str, j: int) -> tuple[str, bytes]:
+        """(topic, serialized message) number ``j`` of stream ``name``."""
+        step_ns, odom, motion = self.traj.step_ns, self.traj.odometry, self.traj.motion
+        if name == "world":
+            return WORLD_TOPIC, mb.string(self.world_json)
+        if name == "tf_static":
+            return "/tf_static", mb.tf_message([(self.t0, st.parent, st.child, st.xyz_m, st.quat_xyzw)
+                                                for st in STATIC_TRANSFORMS])
+        if name == "tf_odom":
+            return "/tf", mb.planar_tf(int(step_ns[j]), "odom", "base_footprint", *odom.poses[j])
+        if name == "odom":
+            return "/odom", mb.odometry(int(step_ns[j]), "odom", "base_footprint", *odom.poses[j],
+                                        self.v_odom[j], self.w_odom[j])
+        if name == "truth":
+            return "/ground_truth", mb.odometry(int(step_ns[j]), "map", "base_footprint", *motion.poses[j],
+                                                self.v_true[j], self.w_true[j], truth=True)
+        if name == "scan":
+            return "/scan", self._scan(mb, j)
+        if name == "tf_map":
+            return "/tf", mb.planar_tf(int(self.scan_ns[j]) + TRANSFORM_TOLERANCE_NS, "map", "odom", *self.amcl.poses[j])
+        if name == "cloud":
+            T_map_optical = pose2tform(self.cloud_poses[j]) @ self.T_base_optical
+            points = self.camera.points(self.world, T_map_optical, self.rngs["cloud"])
+            return CLOUD_TOPIC, mb.point_cloud(int(self.cloud_ns[j]), "camera_rgb_optical_frame", points)
+        return "/clicked_point", mb.point_stamped(int(self.click_ns[j]), "map", self.click_points[j])
+
+    def _scan(self, mb: MessageBuilder, j: int) -> bytes:
+        T_map_scan = pose2tform(self.traj.motion.poses[self.scan_steps[j]]) @ self.T_base_scan
+        yaw = float(self.traj.motion.poses[self.scan_steps[j]][2])
+        x, y, z = T_map_scan[:3, 3]
+        lidar = self.lidar
+        ranges = lidar.scan(self.world, (x, y, z, yaw), self.rngs["scan"])
+        return mb.laser_scan(int(self.scan_ns[j]), "base_scan", ranges, lidar.angle_min_rad, lidar.angle_increment_rad,
+                             lidar.range_min_m, lidar.range_max_m, 1.0 / lidar.rate_hz)
+
+
+def _previous_step(values: np.ndarray) -> np.ndarray:
+    """Per stamp, the value over the step that ended there (0 at the first stamp)."""
+    return np.concatenate(([0.0], values))
 
 
 def simulate_bag(out_path: str | Path, config: SimConfig, force: bool = False) -> SimSummary:
@@ -164,113 +259,26 @@ def simulate_bag(out_path: str | Path, config: SimConfig, force: bool = False) -
     out_path = Path(out_path)
     world = load_world(config.world)
     traj = plan_trajectory(config, world)
-    rngs = _rngs(config.seed)
-    motion, odom, step_ns = traj.motion, traj.odometry, traj.step_ns
-    t0 = config.start_time_ns
-    n_poses = len(step_ns)
-
-    # Scans every 6th step; map->odom from the AMCL model at each scan.
-    scan_steps = np.arange(0, n_poses, STEPS_PER_SCAN)
-    scan_ns = step_ns[scan_steps]
-    amcl = amcl_map_to_odom(motion.poses[scan_steps], odom.poses[scan_steps], rngs["amcl"])
-    lidar = Lidar()
-    T_base_scan = T_base_footprint_frame("base_scan")
-    scan_offset_xy, scan_z = T_base_scan[:2, 3], float(T_base_scan[2, 3])
-
-    if config.cloud:
-        cloud_w, cloud_h = config.cloud_size
-        camera = DepthCamera(width=cloud_w, height=cloud_h)
-        n_clouds = int(np.floor(config.duration_s * config.cloud_rate_hz + 1e-9)) + 1
-        cloud_ns = t0 + np.round(np.arange(n_clouds) * 1e9 / config.cloud_rate_hz).astype(np.int64)
-        cloud_ns = cloud_ns[cloud_ns <= step_ns[-1]]
-        cloud_poses = motion.pose_at_offset((cloud_ns - t0) / 1e9)
-        T_base_optical = T_base_footprint_frame("camera_rgb_optical_frame")
-    else:
-        cloud_ns = np.zeros(0, dtype=np.int64)
-
-    click_ns = t0 + np.arange(1, int(config.duration_s // CLICK_PERIOD_S) + 1, dtype=np.int64) * int(CLICK_PERIOD_S * 1e9)
-    click_points = _clicked_points(world, motion.pose_at_offset((click_ns - t0) / 1e9), rngs["click"])
-
-    # Every message as (log time, kind, index); written in log-time order.
-    lat = rngs["latency"]
-    scan_log = scan_ns + _latency_ns(lat, "scan", len(scan_ns))
-    streams = [
-        ("world", np.array([t0])),
-        ("tf_static", np.array([t0])),
-        ("tf_odom", step_ns + _latency_ns(lat, "tf", n_poses)),
-        ("odom", step_ns + _latency_ns(lat, "odom", n_poses)),
-        ("truth", step_ns + _latency_ns(lat, "truth", n_poses)),
-        ("scan", scan_log),
-        ("tf_map", scan_log + _latency_ns(lat, "amcl", len(scan_ns))),
-        ("cloud", cloud_ns + _latency_ns(lat, "cloud", len(cloud_ns))),
-        ("click", click_ns + _latency_ns(lat, "click", len(click_ns))),
-    ]
-    log_ns = np.concatenate([s[1] for s in streams])
-    kind = np.concatenate([np.full(len(s[1]), i) for i, s in enumerate(streams)])
-    index = np.concatenate([np.arange(len(s[1])) for s in streams])
-    order = np.lexsort((index, kind, log_ns))
-
-    topics = [WORLD_TOPIC, "/tf_static", "/tf", "/odom", "/ground_truth", "/scan", "/clicked_point"]
-    if config.cloud:
-        topics.append(CLOUD_TOPIC)
-    world_json = json.dumps(
-        {"world": world.to_json(), "config": _config_json(config), "robot": "turtlebot3_waffle"}, sort_keys=True
-    )
-    spawn = traj.spawn_xyyaw
-    v_prev = np.concatenate(([0.0], motion.v_mps))  # twist over the step that ended at each stamp
-    w_prev = np.concatenate(([0.0], motion.w_radps))
-    vo_prev = np.concatenate(([0.0], odom.v_mps))
-    wo_prev = np.concatenate(([0.0], odom.w_radps))
-
-    with atomic_path(out_path, force) as staged, SimBagWriter(staged, config.ros_distro, topics) as bag:
+    sim = _BagSimulation(config, world, traj, _rngs(config.seed))
+    names, kinds, indices, log_ns = sim.schedule()
+    with atomic_path(out_path, force) as staged, SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
         mb = MessageBuilder(bag.typestore)
         with progress_bar(total=round(config.duration_s, 3), desc="simulate", unit="s") as bar:
             shown_s = 0.0
-            for i in order:
-                k, j, t_log = int(kind[i]), int(index[i]), int(log_ns[i])
-                name = streams[k][0]
-                if name == "world":
-                    bag.write(WORLD_TOPIC, t_log, mb.string(world_json))
-                elif name == "tf_static":
-                    tfs = [(t0, st.parent, st.child, st.xyz_m, st.quat_xyzw) for st in STATIC_TRANSFORMS]
-                    bag.write("/tf_static", t_log, mb.tf_message(tfs))
-                elif name == "tf_odom":
-                    x, y, yaw = odom.poses[j]
-                    bag.write("/tf", t_log, mb.planar_tf(int(step_ns[j]), "odom", "base_footprint", x, y, yaw))
-                elif name == "odom":
-                    x, y, yaw = odom.poses[j]
-                    bag.write("/odom", t_log, mb.odometry(int(step_ns[j]), "odom", "base_footprint", x, y, yaw, vo_prev[j], wo_prev[j]))
-                elif name == "truth":
-                    x, y, yaw = motion.poses[j]
-                    msg = mb.odometry(int(step_ns[j]), "map", "base_footprint", x, y, yaw, v_prev[j], w_prev[j], truth=True)
-                    bag.write("/ground_truth", t_log, msg)
-                elif name == "scan":
-                    x, y, yaw = motion.poses[scan_steps[j]]
-                    c, s = np.cos(yaw), np.sin(yaw)
-                    sx = x + c * scan_offset_xy[0] - s * scan_offset_xy[1]
-                    sy = y + s * scan_offset_xy[0] + c * scan_offset_xy[1]
-                    ranges = lidar.scan(world, (sx, sy, scan_z, yaw), rngs["scan"])
-                    msg = mb.laser_scan(
-                        int(scan_ns[j]), "base_scan", ranges, lidar.angle_min_rad, lidar.angle_increment_rad,
-                        lidar.range_min_m, lidar.range_max_m, 1.0 / lidar.rate_hz,
-                    )
-                    bag.write("/scan", t_log, msg)
-                elif name == "tf_map":
-                    x, y, yaw = amcl.poses[j]
-                    bag.write("/tf", t_log, mb.planar_tf(int(scan_ns[j]) + TRANSFORM_TOLERANCE_NS, "map", "odom", x, y, yaw))
-                elif name == "cloud":
-                    T_map_optical = _matrix_from_xyyaw(*cloud_poses[j]) @ T_base_optical
-                    points = camera.points(world, T_map_optical, rngs["cloud"])
-                    bag.write(CLOUD_TOPIC, t_log, mb.point_cloud(int(cloud_ns[j]), "camera_rgb_optical_frame", points))
-                else:
-                    bag.write("/clicked_point", t_log, mb.point_stamped(int(click_ns[j]), "map", click_points[j]))
-                sim_s = min((t_log - t0) / 1e9, config.duration_s)
+            for k, j, t_log in zip(kinds.tolist(), indices.tolist(), log_ns.tolist()):
+                topic, data = sim.message(mb, names[k], j)
+                bag.write(topic, t_log, data)
+                sim_s = min((t_log - config.start_time_ns) / 1e9, config.duration_s)
                 if sim_s - shown_s >= 1.0:
                     bar.update(round(sim_s - shown_s, 3))
                     shown_s = sim_s
         counts = dict(bag.counts)
+    return _summary(out_path, config, traj, counts)
 
-    odom_in_map = se2_compose(spawn, odom.poses[-1])
+
+def _summary(out_path: Path, config: SimConfig, traj: Trajectory, counts: dict[str, int]) -> SimSummary:
+    motion = traj.motion
+    odom_in_map = se2_compose(traj.spawn_xyyaw, traj.odometry.poses[-1])
     truth = motion.poses[-1]
     return SimSummary(
         path=out_path,

@@ -20,7 +20,6 @@ from typing import Protocol
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from bagtools.io import TfArrays
 from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING
 from bagtools.transforms import quat2xyzw, tform2quat

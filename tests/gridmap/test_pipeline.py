@@ -10,7 +10,7 @@ import pytest
 
 from bagtools.errors import BagtoolsError
 from bagtools.gridmap import NO_SCAN_TRANSFORM_WARNING, GridMapOptions, GridMapPipeline
-from bagtools.io import TfArrays, open_bag
+from bagtools.io import open_bag
 from bagtools.simtruth import anchor_frame_in_map, read_ground_truth
 from bagtools.trajectory import Trajectory, write_tum
 from bagtools.transforms import pose2tform
