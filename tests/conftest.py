@@ -19,7 +19,7 @@ TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 def real_dir() -> Path:
     """The folder of real ROS bags beside the checkout; skips when absent."""
     if not REAL_DIR.is_dir():
-        pytest.skip(f"real bags not available: {REAL_DIR} does not exist (see DEVELOPERS.md: ../shared/data/real)")
+        pytest.skip(f"real bags not available: {REAL_DIR} does not exist (they live beside the checkout, in ../shared/data/real)")
     return REAL_DIR
 
 
