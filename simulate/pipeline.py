@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from bagtools.outputs import atomic_path
+from bagtools.outputs import atomic_path, check_writable
 from bagtools.progress import progress_bar
 from simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, amcl_map_to_odom
 from simulate.robot.controller import Limits, Motion, drive
@@ -30,7 +30,7 @@ from simulate.robot.waffle import (
 )
 from simulate.sensors import DepthCamera, Lidar
 from simulate.world import World, load_world
-from simulate.writer import ROS_DISTROS, MessageBuilder, SimBagWriter
+from simulate.writer import ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
 from bagtools.transforms import pose2tform
 
 ODOM_RATE_HZ = 30
@@ -257,11 +257,12 @@ def simulate_bag(out_path: str | Path, config: SimConfig, force: bool = False) -
     """
     config.validate()
     out_path = Path(out_path)
+    check_writable(out_path, force, is_rosbag2_output)  # before the work, and again at the final rename
     world = load_world(config.world)
     traj = plan_trajectory(config, world)
     sim = _BagSimulation(config, world, traj, _rngs(config.seed))
     names, kinds, indices, log_ns = sim.schedule()
-    with atomic_path(out_path, force) as staged, SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
+    with atomic_path(out_path, force, is_rosbag2_output) as staged, SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
         mb = MessageBuilder(bag.typestore)
         with progress_bar(total=round(config.duration_s, 3), desc="simulate", unit="s") as bar:
             shown_s = 0.0

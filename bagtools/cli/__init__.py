@@ -1,15 +1,18 @@
 """The ``bagtools`` command: a thin click shell over the library.
 
 Each subcommand lives in its own module and is imported only when invoked, so
-``bagtools --help`` stays fast. This module is the one error boundary: a
-:class:`~bagtools.errors.BagtoolsError` becomes ``bagtools: <file>: <problem>``
-on stderr and exit status 2; anything else is a bug and keeps its traceback.
+``bagtools --help`` stays fast. This module is the one error boundary: every error
+becomes one line, ``bagtools: <file>: <problem>``, on stderr and exit status 2
+(see :func:`main`).
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import signal
 import sys
+import traceback
 
 import click
 
@@ -53,24 +56,97 @@ def cli() -> None:
     """
 
 
+def _input_name(argv: list[str]) -> str | None:
+    """The file a command line is about: the first argument after the command names that is not an option."""
+    names = set(COMMANDS) | {"frames", "echo", "point"}
+    for arg in argv:
+        if arg.startswith("-") or arg in names:
+            continue
+        return arg
+    return None
+
+
+def _usage_line(exc: click.UsageError, argv: list[str]) -> str:
+    """A click usage error as one line that names the file (when there is one) and points to --help."""
+    ctx = exc.ctx
+    command = ctx.command_path if ctx is not None else "bagtools"
+    problem = " ".join(exc.format_message().split()).rstrip(".")
+    if problem:
+        problem = problem[0].lower() + problem[1:]
+    subject = _input_name(argv)
+    prefix = f"{subject}: " if subject else ""
+    return f"bagtools: {prefix}{problem} (see '{command} --help')"
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP arrived: unwind like Ctrl-C, so staged outputs are removed."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(signum)
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the CLI and translate domain errors to exit status 2."""
+    """Console entry point: run the CLI and translate errors to one line and exit status 2.
+
+    Domain errors (:class:`BagtoolsError`), click's usage errors and the
+    operating system's refusals (:class:`OSError`) become ``bagtools: <file>:
+    <problem>``. Anything else is a bug: it is reported on one line as an
+    internal error naming the input, with the traceback when BAGTOOLS_DEBUG is
+    set, and exit status 2 so scripts treat it as a failed input.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    previous = {sig: signal.signal(sig, _raise_terminated) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
-        cli.main(args=argv, prog_name="bagtools", standalone_mode=False)
+        code = _run(args)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    sys.exit(code)
+
+
+def _run(args: list[str]) -> int:
+    try:
+        cli.main(args=args, prog_name="bagtools", standalone_mode=False)
     except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
+        return exc.exit_code
+    except click.UsageError as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError" and exc.ctx is not None:  # bare `bagtools` or `bagtools tf`
+            click.echo(exc.ctx.get_help(), err=True)
+        else:
+            click.echo(_usage_line(exc, args), err=True)
+        return 2
     except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
-    except click.Abort:
-        click.echo("bagtools: aborted", err=True)
-        sys.exit(130)
+        click.echo(f"bagtools: {' '.join(exc.format_message().split())}", err=True)
+        return exc.exit_code
+    except (click.Abort, KeyboardInterrupt):
+        click.echo("bagtools: interrupted; nothing was written", err=True)
+        return 130
+    except Terminated as exc:
+        click.echo(f"bagtools: terminated by signal {exc.signum}; nothing was written", err=True)
+        return 128 + exc.signum
+    except BrokenPipeError:
+        return 0
     except BagtoolsError as exc:
         click.echo(f"bagtools: {exc}", err=True)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        click.echo("bagtools: interrupted", err=True)
-        sys.exit(130)
-    except BrokenPipeError:
-        sys.exit(0)
-    sys.exit(0)
+        return 2
+    except OSError as exc:
+        where = exc.filename if exc.filename is not None else _input_name(args)
+        click.echo(f"bagtools: {where}: {exc.strerror or exc}", err=True)
+        return 2
+    except MemoryError:
+        click.echo(f"bagtools: {_input_name(args)}: out of memory (is the input damaged, or an option too large?)",
+                   err=True)
+        return 2
+    except Exception as exc:  # a bug: one line for the user, the traceback on request
+        if os.environ.get("BAGTOOLS_DEBUG"):
+            traceback.print_exc()
+        detail = " ".join(str(exc).split())[:300]
+        click.echo(f"bagtools: {_input_name(args)}: internal error ({type(exc).__name__}: {detail}); "
+                   "please report it with BAGTOOLS_DEBUG=1 set for the traceback", err=True)
+        return 2
+    return 0

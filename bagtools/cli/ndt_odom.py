@@ -59,9 +59,9 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: st
     result = NdtOdomPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
+    if result.problem is not None:  # a failed run changes nothing in --out
+        raise BagtoolsError(result.problem, bag)
     written = write_ndt_odom(result, out_dir, force)
-    if result.problem is not None:
-        raise BagtoolsError(f"{result.problem}; wrote {', '.join(p.name for p in written)}", bag)
     s = result.summary
     click.echo(f"{s['scans_used']} scans, {s['pairs_matched']} pairs matched, {s['fallbacks']} fell back to the guess "
                f"({s['init']} init, {s['reference']} reference); wrote {', '.join(p.name for p in written)} in {out_dir}")

@@ -53,6 +53,17 @@ TOPICS: dict[str, tuple[str, Qos]] = {
 }
 
 
+def is_rosbag2_output(path: Path) -> bool:
+    """True when ``path`` is a directory ``simulate`` may replace with ``--force``: empty, or a rosbag2
+    directory of metadata.yaml and .mcap files only (a bag it wrote), nothing else of the user's."""
+    entries = list(path.iterdir())
+    if not entries:
+        return True
+    names = {p.name for p in entries}
+    return ("metadata.yaml" in names and all(p.is_file() and not p.is_symlink() for p in entries)
+            and all(n == "metadata.yaml" or n.endswith(".mcap") for n in names))
+
+
 def typestore_for(ros_distro: str) -> Typestore:
     """The rosbags typestore of ``ros_distro`` (humble or jazzy)."""
     if ros_distro not in ROS_DISTROS:

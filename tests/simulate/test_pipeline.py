@@ -188,8 +188,13 @@ def test_refuses_existing_output_without_force(tmp_path):
     with pytest.raises(OutputExistsError):
         simulate_bag(out, SimConfig(duration_s=1.0, cloud=False))
     assert (out / "keep.txt").read_text() == "mine"
+    with pytest.raises(OutputExistsError, match="did not write"):  # --force never deletes a user's directory
+        simulate_bag(out, SimConfig(duration_s=1.0, cloud=False), force=True)
+    assert (out / "keep.txt").read_text() == "mine"
+    (out / "keep.txt").unlink()
     simulate_bag(out, SimConfig(duration_s=1.0, cloud=False), force=True)
-    assert (out / "metadata.yaml").exists() and not (out / "keep.txt").exists()
+    simulate_bag(out, SimConfig(duration_s=2.0, cloud=False), force=True)  # its own bag is replaced
+    assert (out / "metadata.yaml").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bag"]
 
 
 @pytest.mark.parametrize("exc", [RuntimeError("boom"), KeyboardInterrupt()])
