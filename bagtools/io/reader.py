@@ -3,37 +3,63 @@
 ``open_bag(path)`` accepts a rosbag2 directory (MCAP or sqlite3 storage, with or
 without metadata.yaml), a bare ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``,
 and yields time-ordered records. Formats are told apart by their magic bytes,
-not by trust in the suffix. Two failure modes of real bags are handled here:
+not by trust in the suffix. Damage is read around, and said in :attr:`BagReader.warnings`:
 
-- a truncated MCAP (no footer) is read up to the cut by
-  :mod:`bagtools.io.mcap_recovery`, with a warning saying how many messages were
-  recovered;
-- a rosbag2 directory whose metadata.yaml promises messages that rosbags then
-  does not yield (seen with rosbags 0.11.9 when the metadata's QoS differs from
-  the storage file's) is re-read from its storage files directly.
+- MCAP files (bare, or the storage of a rosbag2 directory) are read by
+  :mod:`bagtools.io.mcap_source`: a truncated file up to the cut, a damaged chunk
+  or summary skipped, a garbled message definition costing only its topic;
+- ROS 1 and sqlite3 bags are read with rosbags; a read error in the middle ends
+  the stream with a warning, and a message that cannot be decoded is skipped and
+  counted;
+- a rosbag2 directory whose metadata.yaml counts no messages, or promises
+  messages that rosbags then does not yield (seen with rosbags 0.11.9 when the
+  metadata's QoS differs from the storage file's), is re-read from its storage
+  files directly.
 """
 
 from __future__ import annotations
 
 import heapq
+import struct
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag1 import ReaderError as Rosbag1ReaderError
+from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
-from bagtools.errors import BagError, TopicError
-from bagtools.io.mcap_recovery import RecoveredStream, iter_recovered
+from bagtools.errors import BagError, BagtoolsError, TopicError
+from bagtools.io.mcap_source import MCAP_MAGIC, McapScan, iter_segments, scan_mcap
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _apsw_errors() -> tuple[type[Exception], ...]:
+    try:
+        import apsw
+    except ImportError:  # rosbags reads sqlite3 through apsw; without it there is nothing to catch
+        return ()
+    return (apsw.Error,)
+
+
+def _one_line(err: BaseException) -> str:
+    """An exception as a short single line: its type and its first 200 characters."""
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text[:200]}" if text else type(err).__name__
+
+
 ROS1_MAGIC = b"#ROSBAG V2.0"
 SQLITE_MAGIC = b"SQLite format 3\x00"
 _KIND_BY_MAGIC = {MCAP_MAGIC: "mcap", ROS1_MAGIC: "ros1", SQLITE_MAGIC: "sqlite3"}
 _SUFFIX_BY_KIND = {"mcap": ".mcap", "ros1": ".bag", "sqlite3": ".db3"}
-_ROSBAGS_ERRORS = (AnyReaderError, OSError, KeyError, ValueError, TypeError, AssertionError)
+# What rosbags (and apsw, numpy, zstd underneath) raise on damaged files and messages.
+_READ_ERRORS = (AnyReaderError, Rosbag1ReaderError, Rosbag2ReaderError, TypesysError, OSError, KeyError, ValueError,
+                TypeError, AssertionError, IndexError, AttributeError, OverflowError, MemoryError, EOFError,
+                struct.error, *_apsw_errors())
 
 
 @dataclass(frozen=True)
@@ -100,10 +126,10 @@ class _AnySource:
 
 
 class _MergedSource:
-    """Several complete storage files read directly and merged by bag time."""
+    """Several storage files of one bag, each read by its own source and merged by bag time."""
 
-    def __init__(self, paths: list[Path]) -> None:
-        self.parts = [_AnySource([p]) for p in paths]
+    def __init__(self, parts: list[Any]) -> None:
+        self.parts = parts
         counts: dict[str, TopicInfo] = {}
         for part in self.parts:
             for name, info in part.topics.items():
@@ -112,7 +138,6 @@ class _MergedSource:
         self.topics = counts
         self.start_ns = min(p.start_ns for p in self.parts)
         self.end_ns = max(p.end_ns for p in self.parts)
-        self._deser_by_part = {id(p): p.deserializer() for p in self.parts}
 
     def raw(self, topics: set[str] | None) -> Iterator[RawRecord]:
         return heapq.merge(*(p.raw(topics) for p in self.parts), key=lambda r: r.log_time_ns)
@@ -126,50 +151,58 @@ class _MergedSource:
             part.close()
 
 
-class _RecoveredMcapSource:
-    """Messages of a truncated MCAP, up to the cut (see :mod:`mcap_recovery`)."""
+class _McapSource:
+    """An MCAP file read with :mod:`bagtools.io.mcap_source`: whatever is readable, in log-time order.
+
+    ``warnings`` says what was lost (a truncation, damaged chunks, topics whose
+    message definition cannot be parsed); ``message_count`` counts what can be read.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.state = RecoveredStream()
-        counts: dict[int, int] = {}
-        times: list[int] = []
-        for message in iter_recovered(path, self.state):
-            counts[message.channel_id] = counts.get(message.channel_id, 0) + 1
-            times.append(message.log_time)
-        self.message_count = sum(counts.values())
+        self.scan = scan_mcap(path)
+        self.warnings: list[str] = []
+        self.typestore, unusable = _typestore_from_schemas(self.scan)
         self.topics: dict[str, TopicInfo] = {}
-        for channel_id, count in counts.items():
-            channel = self.state.channels.get(channel_id)
-            if channel is None:
+        self._channels: dict[int, tuple[str, str]] = {}  # channel id -> (topic, msgtype)
+        skipped: dict[str, int] = {}
+        for channel_id, count in sorted(self.scan.counts.items()):
+            channel = self.scan.channels.get(channel_id)
+            schema = self.scan.schemas.get(channel.schema_id) if channel is not None else None
+            if channel is None or schema is None or schema.name in unusable:
+                name = channel.topic if channel is not None else f"channel {channel_id}"
+                skipped[name] = skipped.get(name, 0) + count
                 continue
-            schema = self.state.schemas.get(channel.schema_id)
-            msgtype = schema.name if schema else "unknown"
+            self._channels[channel_id] = (channel.topic, schema.name)
             prev = self.topics.get(channel.topic)
-            self.topics[channel.topic] = TopicInfo(channel.topic, msgtype, count + (prev.count if prev else 0))
-        self.start_ns = min(times) if times else 0
-        self.end_ns = max(times) if times else 0
-        self.typestore = _typestore_from_schemas(self.state)
+            self.topics[channel.topic] = TopicInfo(channel.topic, schema.name, count + (prev.count if prev else 0))
+        self.message_count = sum(t.count for t in self.topics.values())
+        self.start_ns = self.scan.start_ns or 0
+        self.end_ns = self.scan.end_ns or 0
+        self._warn(unusable, skipped)
+
+    def _warn(self, unusable: dict[str, str], skipped: dict[str, int]) -> None:
+        scan = self.scan
+        if not scan.complete and scan.cut_at_byte is not None:
+            self.warnings.append(f"{self.path}: truncated MCAP (no footer; cut at byte {scan.cut_at_byte}): "
+                                 f"recovered {scan.message_count} messages before the cut")
+        if scan.damage:
+            more = f" (and {len(scan.damage) - 1} more)" if len(scan.damage) > 1 else ""
+            lost = f", {scan.lost_messages} messages known to be lost" if scan.lost_messages else ""
+            self.warnings.append(f"{self.path}: damaged MCAP: {scan.damage[0]}{more}; "
+                                 f"read {scan.message_count} messages{lost}")
+        for topic, count in skipped.items():
+            why = next(iter(unusable.values()), "no schema or channel record")
+            self.warnings.append(f"{self.path}: {topic}: message definition unusable ({why}); "
+                                 f"its {count} messages are skipped")
 
     def raw(self, topics: set[str] | None) -> Iterator[RawRecord]:
-        pending: list[tuple[int, int, RawRecord]] = []
-        state = RecoveredStream()
-        # MCAP files are mostly but not strictly in log-time order; a small heap
-        # restores order across chunk boundaries without holding the file.
-        horizon_ns = 2_000_000_000
-        seq = 0
-        for message in iter_recovered(self.path, state):
-            channel = state.channels.get(message.channel_id)
-            if channel is None or (topics is not None and channel.topic not in topics):
-                continue
-            schema = state.schemas.get(channel.schema_id)
-            rec = RawRecord(channel.topic, schema.name if schema else "unknown", message.log_time, message.data)
-            heapq.heappush(pending, (message.log_time, seq, rec))
-            seq += 1
-            while pending and pending[0][0] < message.log_time - horizon_ns:
-                yield heapq.heappop(pending)[2]
-        while pending:
-            yield heapq.heappop(pending)[2]
+        wanted = {cid for cid, (topic, _) in self._channels.items() if topics is None or topic in topics}
+        if not wanted:
+            return
+        for message in iter_segments(self.path, self.scan, wanted):
+            topic, msgtype = self._channels[message.channel_id]
+            yield RawRecord(topic, msgtype, message.log_time, message.data)
 
     def deserializer(self) -> Callable[[RawRecord], Any]:
         return lambda rec: self.typestore.deserialize_cdr(bytes(rec.raw), rec.msgtype)
@@ -178,21 +211,54 @@ class _RecoveredMcapSource:
         pass
 
 
-def _typestore_from_schemas(state: RecoveredStream) -> Any:
-    """A typestore with the recovered MCAP schemas (ROS 2 Humble types as fallback)."""
+def _typestore_from_schemas(scan: McapScan) -> tuple[Any, dict[str, str]]:
+    """A typestore with the MCAP's schemas (ROS 2 Humble types as fallback), and the unusable ones.
+
+    Returns (typestore, {schema name: why it is unusable}); one garbled schema
+    does not stop the others from being read. Cached by the schemas' text, as
+    commands open the same bag more than once (building one costs ~0.1 s).
+    """
+    key = tuple(sorted((s.name, s.encoding, bytes(s.data)) for s in scan.schemas.values()))
+    return _typestore_for(key)
+
+
+@lru_cache(maxsize=8)
+def _typestore_for(key: tuple[tuple[str, str, bytes], ...]) -> tuple[Any, dict[str, str]]:
     typestore = get_typestore(Stores.ROS2_HUMBLE)
-    types: dict[str, Any] = {}
-    for schema in state.schemas.values():
-        text = schema.data.decode("utf-8", "replace")
-        if schema.encoding == "ros2msg":
-            types.update(get_types_from_msg(text, schema.name))
-        elif schema.encoding == "ros2idl":
-            sep = "=" * 80 + "\n"
-            parts = text.split(sep)[1:] if text.startswith(f"{sep}IDL: ") else [f"IDL: x\n{text}"]
-            for part in parts:
-                types.update(get_types_from_idl(part.split("\n", 1)[1]))
-    typestore.register(types)
-    return typestore
+    unusable: dict[str, str] = {}
+    schemas = [_SchemaText(name, encoding, data) for name, encoding, data in key]
+    for schema in schemas:
+        try:
+            types = _types_of_schema(schema)
+            typestore.register(types)
+        except Exception as err:  # rosbags' parsers raise several types on garbage text
+            if schema.name not in typestore.types:
+                unusable[schema.name] = f"{type(err).__name__}: {' '.join(str(err).split())[:120]}"
+    for schema in schemas:
+        if schema.name not in typestore.types and schema.name not in unusable:
+            unusable[schema.name] = "unknown message type"
+    return typestore, unusable
+
+
+@dataclass(frozen=True)
+class _SchemaText:
+    name: str
+    encoding: str
+    data: bytes
+
+
+def _types_of_schema(schema: Any) -> dict[str, Any]:
+    text = schema.data.decode("utf-8")
+    if schema.encoding == "ros2msg":
+        return dict(get_types_from_msg(text, schema.name))
+    if schema.encoding == "ros2idl":
+        types: dict[str, Any] = {}
+        sep = "=" * 80 + "\n"
+        parts = text.split(sep)[1:] if text.startswith(f"{sep}IDL: ") else [f"IDL: x\n{text}"]
+        for part in parts:
+            types.update(get_types_from_idl(part.split("\n", 1)[1]))
+        return types
+    raise BagtoolsError(f"schema encoding {schema.encoding!r} is not a ROS 2 message definition")
 
 
 def _topics_of(connections: Iterable[Connection], count: Callable[[Connection], int]) -> dict[str, TopicInfo]:
@@ -250,24 +316,25 @@ class BagReader:
         return kind, self._open_file(path, kind)
 
     def _open_file(self, path: Path, kind: str) -> Any:
+        if kind == "mcap":
+            return self._open_mcap(path)
         try:
             return _AnySource([path])
-        except _ROSBAGS_ERRORS as err:
-            if kind == "mcap":
-                return self._recover_mcap(path, err)
-            raise BagError(f"cannot read {kind} bag: {err}", path) from err
+        except _READ_ERRORS as err:
+            raise BagError(f"cannot read {kind} bag: {_one_line(err)}", path) from err
 
-    def _recover_mcap(self, path: Path, err: Exception) -> _RecoveredMcapSource:
-        source = _RecoveredMcapSource(path)
-        if source.state.complete and source.message_count == 0:
-            raise BagError(f"cannot read MCAP: {err}", path) from err
+    def _open_mcap(self, path: Path) -> _McapSource:
+        source = _McapSource(path)
+        self.warnings.extend(source.warnings)
         if source.message_count == 0:
-            raise BagError(f"truncated MCAP (cut at byte {source.state.cut_at_byte}): no message could be recovered", path) from err
-        if not source.state.complete:
-            self.warnings.append(
-                f"{path}: truncated MCAP (no footer; cut at byte {source.state.cut_at_byte}): "
-                f"recovered {source.message_count} messages before the cut"
-            )
+            scan = source.scan
+            if not scan.complete and scan.cut_at_byte is not None and not scan.damage:
+                raise BagError(f"truncated MCAP (cut at byte {scan.cut_at_byte}): no message could be recovered", path)
+            if scan.damage:
+                raise BagError(f"damaged MCAP, no message could be read: {scan.damage[0]}", path)
+            if scan.message_count:
+                raise BagError("no message can be decoded: " + "; ".join(w.split(": ", 1)[1] for w in source.warnings),
+                               path)
         return source
 
     def _open_directory(self, directory: Path) -> Any:
@@ -277,14 +344,23 @@ class BagReader:
                 raise BagError("directory is not a rosbag2 bag (no metadata.yaml and no .mcap or .db3 file)", directory)
             self.warnings.append(f"{directory}: no metadata.yaml; reading its storage files directly")
             return self._open_storage(storage)
+        if storage and all(p.suffix == ".mcap" for p in storage):
+            # MCAP files carry their own schemas and counts: read them directly, which also survives
+            # damage and a metadata.yaml that disagrees with them (counts, QoS, compression).
+            return self._open_storage(storage)
         try:
             source: Any = _AnySource([directory])
-        except _ROSBAGS_ERRORS as err:
+        except _READ_ERRORS as err:
             if not storage:
-                raise BagError(f"cannot read rosbag2 directory: {err}", directory) from err
-            self.warnings.append(f"{directory}: rosbag2 metadata unreadable ({err}); reading its storage files directly")
+                raise BagError(f"cannot read rosbag2 directory: {_one_line(err)}", directory) from err
+            self.warnings.append(f"{directory}: rosbag2 metadata unreadable ({_one_line(err)}); "
+                                 "reading its storage files directly")
             return self._open_storage(storage)
         promised = sum(t.count for t in source.topics.values())
+        if storage and promised == 0:
+            source.close()
+            self.warnings.append(f"{directory}: metadata.yaml counts no messages; reading its storage files directly")
+            return self._open_storage(storage)
         if promised > 0 and next(source.raw(None), None) is None and storage:
             source.close()
             self.warnings.append(
@@ -295,13 +371,8 @@ class BagReader:
         return source
 
     def _open_storage(self, storage: list[Path]) -> Any:
-        if len(storage) == 1:
-            kind = sniff_kind(storage[0]) or "unknown"
-            return self._open_file(storage[0], kind)
-        try:
-            return _MergedSource(storage)
-        except _ROSBAGS_ERRORS as err:
-            raise BagError(f"cannot read storage files: {err}", storage[0].parent) from err
+        parts = [self._open_file(p, sniff_kind(p) or "unknown") for p in storage]
+        return parts[0] if len(parts) == 1 else _MergedSource(parts)
 
     # -- reading -----------------------------------------------------------------
 
@@ -327,25 +398,53 @@ class BagReader:
         return info
 
     def raw_messages(self, topics: Iterable[str] | None = None) -> Iterator[RawRecord]:
-        """Yield serialized messages of ``topics`` (all if None) in bag-time order."""
+        """Yield serialized messages of ``topics`` (all if None) in bag-time order.
+
+        A read error in the middle of a damaged ROS 1 or sqlite3 bag ends the
+        stream with a warning in :attr:`warnings` (what was read is kept);
+        damaged MCAP chunks were already skipped when the bag was opened.
+        """
         wanted = None if topics is None else set(topics)
+        n = 0
         try:
-            yield from self._source.raw(wanted)
-        except _ROSBAGS_ERRORS as err:
-            raise BagError(f"read error: {err}", self.path) from err
+            for rec in self._source.raw(wanted):
+                yield rec
+                n += 1
+        except _READ_ERRORS as err:
+            self._warn_once(f"{self.path}: read error after {n} messages ({_one_line(err)}); "
+                            "the rest of the bag could not be read")
 
     def deserialize(self, rec: RawRecord) -> Record:
         """Deserialize one raw record into a :class:`Record` (raises :class:`BagError`)."""
         try:
             msg = self._deserialize(rec)
-        except _ROSBAGS_ERRORS as err:
-            raise BagError(f"cannot decode a {rec.msgtype} message on {rec.topic}: {err}", self.path) from err
+        except _READ_ERRORS as err:
+            raise BagError(f"cannot decode a {rec.msgtype} message on {rec.topic}: {_one_line(err)}", self.path) from err
         return Record(rec.topic, rec.msgtype, rec.log_time_ns, msg)
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[Record]:
-        """Yield deserialized messages of ``topics`` (all if None) in bag-time order."""
-        for rec in self.raw_messages(topics):
-            yield self.deserialize(rec)
+        """Yield deserialized messages of ``topics`` (all if None) in bag-time order.
+
+        A message that cannot be decoded (damaged bytes) is skipped; how many,
+        per topic, is added to :attr:`warnings` when the iteration ends.
+        """
+        failed: dict[str, int] = {}
+        first_error = ""
+        try:
+            for rec in self.raw_messages(topics):
+                try:
+                    yield self.deserialize(rec)
+                except BagError as err:
+                    failed[rec.topic] = failed.get(rec.topic, 0) + 1
+                    first_error = first_error or err.problem
+        finally:
+            if failed:
+                counts = ", ".join(f"{n} on {topic}" for topic, n in failed.items())
+                self._warn_once(f"{self.path}: skipped messages that cannot be decoded ({counts}; first: {first_error})")
+
+    def _warn_once(self, warning: str) -> None:
+        if warning not in self.warnings:
+            self.warnings.append(warning)
 
     def close(self) -> None:
         """Release the files."""

@@ -1,0 +1,412 @@
+"""Read an MCAP file that may be damaged: truncated, bad chunks, a broken summary.
+
+A robot that loses power leaves an MCAP without footer or summary; a bad disk or
+a bad copy flips bits inside a chunk, or in the summary's offsets. rosbags'
+reader needs every part intact and stops at the first bad byte. This module
+reads what is readable and says what was lost.
+
+:func:`scan_mcap` walks the file's records once from the start (with the
+``mcap`` package's stream reader), decompresses every chunk, checks its CRC and
+its declared sizes, and parses the records inside it. A record it cannot read is
+skipped: the walk resumes at the next chunk the summary knows of (when the
+summary is readable) or ends there, as at a truncation; a chunk cut by a
+truncation is decompressed as far as its complete zstd/lz4 blocks go. The scan
+keeps the schemas and channels, message counts per channel, the readable
+*segments* (chunks, or runs of unchunked messages) in file order, and one-line
+descriptions of the damage.
+
+:func:`iter_segments` then streams the messages of the readable segments in
+log-time order, exactly: each segment's earliest stamp is known from the scan,
+so a message is released once no later segment can hold an earlier one.
+"""
+
+from __future__ import annotations
+
+import heapq
+import io
+import struct
+import zlib
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Message, MessageIndex, Schema
+from mcap.stream_reader import StreamReader
+
+#: Largest decompressed chunk accepted (a damaged size field must not make us allocate terabytes).
+MAX_CHUNK_BYTES = 1 << 30
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, crc
+_READ_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError, OverflowError, MemoryError, IndexError,
+                KeyError, TypeError, AttributeError)
+
+
+class ChunkDamaged(Exception):
+    """A chunk cannot be used: what is wrong, in words."""
+
+
+@dataclass
+class Segment:
+    """Readable messages at one place in the file.
+
+    ``offset`` is the file offset of a chunk record (``n_top_level == 0``) or of
+    the first of ``n_top_level`` unchunked message records. ``n_good`` is how
+    many messages of it parse (a chunk damaged inside keeps its first ones);
+    ``start_ns`` is its earliest log time; ``channels`` the channel ids in it.
+    """
+
+    offset: int
+    start_ns: int
+    n_good: int
+    channels: set[int]
+    n_top_level: int = 0
+    partial_body: bool = False  # a chunk cut short by a truncation: read its prefix
+
+
+@dataclass
+class McapScan:
+    """What one pass over an MCAP file found (see the module docstring)."""
+
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    counts: dict[int, int] = field(default_factory=dict)
+    segments: list[Segment] = field(default_factory=list)
+    start_ns: int | None = None
+    end_ns: int | None = None
+    complete: bool = False  # the footer was reached
+    cut_at_byte: int | None = None  # where a truncated file ends in the middle of a record
+    damage: list[str] = field(default_factory=list)
+    lost_messages: int = 0  # messages known (from message indexes) to be in unreadable chunks
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.counts.values())
+
+
+def decompress_chunk(chunk: Chunk, allow_partial: bool = False) -> bytes:
+    """The records of ``chunk``, decompressed and CRC-checked; raises :class:`ChunkDamaged`.
+
+    With ``allow_partial`` (a chunk cut by a truncation) as much as the data
+    gives is returned and neither the size nor the CRC is checked.
+    """
+    if chunk.uncompressed_size > MAX_CHUNK_BYTES:
+        raise ChunkDamaged(f"declares {chunk.uncompressed_size} uncompressed bytes (limit {MAX_CHUNK_BYTES})")
+    try:
+        if chunk.compression == "":
+            data = bytes(chunk.data)
+        elif chunk.compression == "zstd":
+            import zstandard
+
+            if allow_partial:
+                data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
+            else:  # never more than the declared size (+1 to see a lie), whatever the frame header says
+                data = zstandard.ZstdDecompressor().stream_reader(chunk.data).read(chunk.uncompressed_size + 1)
+        elif chunk.compression == "lz4":
+            import lz4.frame
+
+            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
+        else:
+            raise ChunkDamaged(f"unknown compression {chunk.compression[:40]!r}")
+    except ChunkDamaged:
+        raise
+    except Exception as err:  # zstd/lz4 raise their own error types on corrupt frames
+        raise ChunkDamaged(f"does not decompress ({type(err).__name__}: {err})") from err
+    if allow_partial:
+        return data
+    if len(data) != chunk.uncompressed_size:
+        raise ChunkDamaged(f"decompresses to {len(data)} bytes, not the {chunk.uncompressed_size} it declares")
+    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ChunkDamaged("checksum mismatch (CRC of its records differs from the one recorded)")
+    return data
+
+
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+
+
+def chunk_records(data: bytes) -> Iterator[Schema | Channel | Message]:
+    """The schema, channel and message records packed in a decompressed chunk, in order.
+
+    Message payloads are zero-copy views of ``data``. Raises an MCAP error where
+    the records stop parsing (a damaged length); what came before has been yielded.
+    """
+    view = memoryview(data)
+    end = len(data)
+    pos = 0
+    while pos < end:
+        if end - pos < _RECORD_HEAD.size:
+            raise McapError(f"{end - pos} stray bytes at the end of a chunk")
+        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+        body = pos + _RECORD_HEAD.size
+        if length > end - body:
+            raise McapError(f"record of {length} bytes overruns its chunk")
+        if opcode == Opcode.MESSAGE:
+            if length < _MESSAGE_HEAD.size:
+                raise McapError(f"message record of {length} bytes is too short")
+            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(data, body)
+            yield Message(channel_id=channel_id, log_time=log_time, publish_time=publish_time, sequence=sequence,
+                          data=view[body + _MESSAGE_HEAD.size: body + length])
+        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+            stream = ReadDataStream(io.BytesIO(view[body: body + length]))
+            yield Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream)
+        pos = body + length
+
+
+def _summary_chunk_offsets(f: io.BufferedReader, size: int) -> list[int]:
+    """Chunk offsets from the summary's chunk indexes, or [] when the footer or summary is unreadable."""
+    if size < len(MCAP_MAGIC) * 2 + _FOOTER_BYTES:
+        return []
+    try:
+        f.seek(size - len(MCAP_MAGIC) - _FOOTER_BYTES)
+        footer = next(StreamReader(f, skip_magic=True, record_size_limit=64).records)
+        if not isinstance(footer, Footer) or not 0 < footer.summary_start < size:
+            return []
+        f.seek(footer.summary_start)
+        offsets = []
+        for record in StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records:
+            if isinstance(record, ChunkIndex):
+                offsets.append(int(record.chunk_start_offset))
+            elif isinstance(record, Footer):
+                break
+        return sorted(o for o in offsets if 0 < o < size)
+    except (*_READ_ERRORS, StopIteration):
+        return []
+
+
+class _Walker:
+    """The top-level records of the file, from ``offset``, as (start offset, record); stops at a bad record."""
+
+    def __init__(self, f: io.BufferedReader, size: int) -> None:
+        self.f = f
+        self.size = size
+        self.error: Exception | None = None
+        self.failed_at: int | None = None
+
+    def records(self, offset: int) -> Iterator[tuple[int, object]]:
+        self.f.seek(offset)
+        reader = StreamReader(self.f, skip_magic=True, emit_chunks=True, record_size_limit=self.size - offset)
+        records = reader.records
+        position = offset
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except _READ_ERRORS as err:
+                self.error, self.failed_at = err, position
+                return
+            yield position, record
+            position = self.f.tell()
+
+
+def scan_mcap(path: Path) -> McapScan:
+    """One pass over the MCAP at ``path``: what is readable, and what is damaged (see the module docstring)."""
+    scan = McapScan()
+    with path.open("rb") as f:
+        size = f.seek(0, io.SEEK_END)
+        f.seek(0)
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            scan.damage.append("no MCAP magic at the start")
+            return scan
+        walker = _Walker(f, size)
+        resync: list[int] | None = None
+        offset = len(MCAP_MAGIC)
+        run: Segment | None = None  # the current run of unchunked messages
+        chunk_tally = [0, 0]  # messages read from the last chunk, and indexed for it by the message indexes after it
+        while True:
+            for position, record in walker.records(offset):
+                if isinstance(record, Chunk):
+                    run = None
+                    _settle(scan, chunk_tally)
+                    chunk_tally = [_scan_chunk(scan, position, record), 0]
+                elif isinstance(record, MessageIndex):
+                    chunk_tally[1] += len(record.records)
+                elif isinstance(record, Message):
+                    if run is None:
+                        run = Segment(position, record.log_time, 0, set(), n_top_level=0)
+                        scan.segments.append(run)
+                    run.n_top_level += 1
+                    run.n_good += 1
+                    run.start_ns = min(run.start_ns, record.log_time)
+                    run.channels.add(record.channel_id)
+                    _count(scan, record)
+                elif isinstance(record, (Schema, Channel)):
+                    _register(scan, record)
+                elif isinstance(record, DataEnd):
+                    run = None
+                elif isinstance(record, Footer):
+                    scan.complete = True
+            _settle(scan, chunk_tally)
+            chunk_tally = [0, 0]
+            if scan.complete or walker.failed_at is None:
+                if not scan.complete:
+                    scan.cut_at_byte = size
+                return _finish(scan)
+            # A record could not be read. Resume at the next chunk the summary knows, if any.
+            failed_at = walker.failed_at
+            if resync is None:
+                resync = _summary_chunk_offsets(f, size)
+            later = [o for o in resync if o > failed_at]
+            if not later:
+                if _ends_with_magic(f, size):  # a complete file with a bad record: damage, not a cut
+                    scan.complete = True
+                    scan.damage.append(f"record at byte {failed_at} unreadable ({_describe(walker.error)}); "
+                                       "the rest of the data was skipped")
+                else:
+                    scan.cut_at_byte = failed_at
+                    _recover_cut_chunk(scan, f, failed_at, size)
+                return _finish(scan)
+            scan.damage.append(f"bytes {failed_at}-{later[0]} unreadable ({_describe(walker.error)}); "
+                               "resumed at the next chunk")
+            walker.failed_at = None
+            offset = later[0]
+            run = None
+
+
+def _ends_with_magic(f: io.BufferedReader, size: int) -> bool:
+    f.seek(max(0, size - len(MCAP_MAGIC)))
+    return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+
+
+def _settle(scan: McapScan, chunk_tally: list[int]) -> None:
+    """Count the messages a chunk's indexes promise beyond those it gave."""
+    scan.lost_messages += max(0, chunk_tally[1] - chunk_tally[0])
+
+
+def _scan_chunk(scan: McapScan, position: int, chunk: Chunk, partial: bool = False) -> int:
+    """Add a chunk's readable messages to ``scan`` (noting any damage); return how many there are."""
+    try:
+        data = decompress_chunk(chunk, allow_partial=partial)
+    except ChunkDamaged as err:
+        scan.damage.append(f"chunk at byte {position} {err}; its messages are skipped")
+        return 0
+    segment = Segment(position, chunk.message_start_time, 0, set(), partial_body=partial)
+    try:
+        for record in chunk_records(data):
+            if isinstance(record, Message):
+                # Without a CRC, damage shows as records that contradict the chunk: a channel never
+                # declared, or a stamp outside the chunk's declared time range.
+                if record.channel_id not in scan.channels:
+                    raise McapError(f"a message on undeclared channel {record.channel_id}")
+                if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
+                    raise McapError(f"a message stamped outside the chunk's time range")
+                segment.n_good += 1
+                segment.channels.add(record.channel_id)
+                segment.start_ns = min(segment.start_ns, record.log_time)
+                _count(scan, record)
+            elif isinstance(record, (Schema, Channel)):
+                _register(scan, record)
+    except _READ_ERRORS as err:
+        if not partial:
+            scan.damage.append(f"chunk at byte {position} is damaged after {segment.n_good} messages "
+                               f"({_describe(err)}); the rest of it is skipped")
+    if segment.n_good:
+        scan.segments.append(segment)
+    return segment.n_good
+
+
+def _recover_cut_chunk(scan: McapScan, f: io.BufferedReader, position: int, size: int) -> None:
+    """The file ends inside the record at ``position``: if it is a chunk, take what its prefix holds."""
+    chunk = _read_cut_chunk(f, position, size)
+    if chunk is not None:
+        _scan_chunk(scan, position, chunk, partial=True)
+
+
+def _read_cut_chunk(f: io.BufferedReader, position: int, size: int) -> Chunk | None:
+    """The chunk record at ``position`` with as much of its data as the file holds (None if not a chunk)."""
+    head_size = 1 + 8 + 8 + 8 + 8 + 4 + 4
+    f.seek(position)
+    head = f.read(head_size)
+    if len(head) < head_size or head[0] != 0x06:
+        return None
+    start_ns, end_ns, uncompressed_size, crc, name_len = struct.unpack_from("<QQQII", head, 9)
+    if name_len > 64:
+        return None
+    compression = f.read(name_len).decode("utf-8", "replace")
+    if len(f.read(8)) < 8:
+        return None
+    data = f.read(max(0, min(size - f.tell(), MAX_CHUNK_BYTES)))
+    return Chunk(compression=compression, data=data, message_end_time=end_ns, message_start_time=start_ns,
+                 uncompressed_crc=crc, uncompressed_size=min(uncompressed_size, MAX_CHUNK_BYTES))
+
+
+def _describe(err: BaseException) -> str:
+    text = " ".join(str(err).split())[:120]
+    return text if isinstance(err, McapError) and text else f"{type(err).__name__}: {text}".rstrip(": ")
+
+
+def _count(scan: McapScan, message: Message) -> None:
+    scan.counts[message.channel_id] = scan.counts.get(message.channel_id, 0) + 1
+    t = message.log_time
+    scan.start_ns = t if scan.start_ns is None else min(scan.start_ns, t)
+    scan.end_ns = t if scan.end_ns is None else max(scan.end_ns, t)
+
+
+def _register(scan: McapScan, record: Schema | Channel) -> None:
+    if isinstance(record, Schema):
+        scan.schemas.setdefault(record.id, record)
+    else:
+        scan.channels.setdefault(record.id, record)
+
+
+def _finish(scan: McapScan) -> McapScan:
+    scan.segments.sort(key=lambda s: s.offset)
+    return scan
+
+
+def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None) -> Iterator[Message]:
+    """Messages of the readable segments of ``scan`` on ``channel_ids`` (all if None), in log-time order."""
+    segments = [s for s in scan.segments if channel_ids is None or s.channels & channel_ids]
+    # later_start[i]: the earliest stamp any segment after i can hold.
+    later_start = [0] * len(segments)
+    running = None
+    for i in range(len(segments) - 1, -1, -1):
+        later_start[i] = running if running is not None else 1 << 64
+        running = segments[i].start_ns if running is None else min(running, segments[i].start_ns)
+    pending: list[tuple[int, int, Message]] = []
+    seq = 0
+    with path.open("rb") as f:
+        size = f.seek(0, io.SEEK_END)
+        for segment, release_below in zip(segments, later_start):
+            for message in _segment_messages(f, size, segment):
+                if channel_ids is None or message.channel_id in channel_ids:
+                    heapq.heappush(pending, (message.log_time, seq, message))
+                    seq += 1
+            while pending and pending[0][0] <= release_below:
+                yield heapq.heappop(pending)[2]
+    while pending:
+        yield heapq.heappop(pending)[2]
+
+
+def _segment_messages(f: io.BufferedReader, size: int, segment: Segment) -> Iterable[Message]:
+    """The first ``segment.n_good`` messages of a segment (the readable ones, as the scan found)."""
+    taken = 0
+    if segment.n_top_level:
+        f.seek(segment.offset)
+        records = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records
+        for record in records:
+            if isinstance(record, Message):
+                yield record
+                taken += 1
+                if taken == segment.n_good:
+                    return
+        return
+    if segment.partial_body:
+        chunk = _read_cut_chunk(f, segment.offset, size)
+        data = decompress_chunk(chunk, allow_partial=True) if chunk is not None else b""
+    else:
+        f.seek(segment.offset)
+        chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records)
+        data = decompress_chunk(chunk)
+    records = chunk_records(data)
+    while taken < segment.n_good:
+        try:
+            record = next(records)
+        except (StopIteration, *_READ_ERRORS):
+            return
+        if isinstance(record, Message):
+            yield record
+            taken += 1
