@@ -81,9 +81,9 @@ def test_bad_chunk_is_skipped_with_a_count(how: str, layout: dict, tmp_path: Pat
     assert len(warnings) == 1 and "damaged MCAP" in warnings[0] and f"chunk at byte {position}" in warnings[0]
     assert "known to be lost" in warnings[0]
     reference = layout["reference"]
-    if how == "flipped_bits":  # no CRC in this file: bytes before the detected damage may be wrong too
-        got, reference = [m[:2] for m in got], [m[:2] for m in reference]
-    assert 0 < len(got) < len(reference) and _ordered_subset(got, reference)
+    assert 0 < len(got) < len(reference)
+    if how != "flipped_bits":  # no CRC in this file: flipped records before the detected damage may pass
+        assert _ordered_subset(got, reference)
 
 
 def test_damaged_record_length_resumes_at_the_next_chunk(layout: dict, tmp_path: Path) -> None:
