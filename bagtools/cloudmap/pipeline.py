@@ -19,10 +19,9 @@ from typing import Literal
 import numpy as np
 
 from bagtools.cloudmap.accumulator import PointAccumulator, random_subset
-from bagtools.cloudmap.sources import iter_sensor_points
+from bagtools.dataset import SensorStream
 from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
-from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
@@ -104,6 +103,7 @@ class CloudMapPipeline:
             self.warnings = list(bag.warnings)
             self._load_tf(bag)
             self._map_clouds(bag)
+            self.warnings = list(dict.fromkeys(list(bag.warnings) + self.warnings + self.stream.warnings()))
             if self.clouds_used == 0:
                 reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.items()) or "no messages"
                 raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
@@ -155,10 +155,10 @@ class CloudMapPipeline:
 
     def _map_clouds(self, bag: BagReader) -> None:
         opts = self.options
-        total = bag.topics[opts.topic].count
         self.sample = opts.sample if opts.sample is not None else (
             1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
-        for item in progress(iter_sensor_points(bag, opts.topic), total=total, desc="mapping", unit="cloud"):
+        self.stream = SensorStream(bag, opts.topic, desc="mapping")
+        for item in self.stream:
             self.sensor_frames.add(item.frame_id)
             self.points_in += item.points.shape[0]
             if item.points.shape[0] == 0:
@@ -177,6 +177,7 @@ class CloudMapPipeline:
             self.accumulator.add((points.astype(np.float64) @ R.T + t).astype(np.float32))
             self._sensor_path.append(t.copy())
             self.clouds_used += 1
+        self.skipped.update(self.stream.skip_counts)
 
     def _evaluate(self, bag: BagReader, points: np.ndarray) -> dict:
         """For a simulated bag: distances of the map's points to the true world surfaces.

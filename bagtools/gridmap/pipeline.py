@@ -2,7 +2,7 @@
 
     GridMapPipeline(bag, options).run()
         _load_tf()          the bag's tf buffer (small: /tf and /tf_static)
-        _pose_source()      tf, /ground_truth or a TUM trajectory (see bagtools.gridmap.poses)
+        _pose_source()      tf, /ground_truth or a TUM trajectory (see bagtools.dataset.poses)
         _map_scans()        per chunk of scans: batched pose lookup, grid growth; per scan: insert_ray
         _evaluate()         the map against the true world, for simulated bags
 
@@ -39,10 +39,10 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
-from bagtools.gridmap.poses import ScanPoseSource, TfScanPoses, TrajectoryScanPoses
 from bagtools.tf.repair import drop_translation_spikes, guess_base_frame
-from bagtools.gridmap.scans import PosedScan, iter_posed_scan_chunks
+from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks
 from bagtools.io import LASERSCAN_TYPES, BagReader, open_bag, read_tf_arrays
+from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import TfBuffer
 from bagtools.trajectory import read_tum
@@ -88,7 +88,8 @@ class GridMapPipeline:
             self._load_tf(bag)
             self.poses = self._pose_source(bag)
             grid = self._map_scans(bag)
-            self.warnings = list(bag.warnings) + self.buffer.warnings + self.poses.warnings + self.warnings
+            self.warnings = list(dict.fromkeys(list(bag.warnings) + self.buffer.warnings + self.poses.warnings
+                                               + self.scan_stream.warnings() + self.warnings))
             summary = self._summary(grid)
             summary["elapsed_s"] = round(time.perf_counter() - t0, 3)
             summary.update(self._evaluate(bag, grid))
@@ -133,12 +134,15 @@ class GridMapPipeline:
         return TrajectoryScanPoses(trajectory.stamps_ns, trajectory.poses, opts.frame, base, self.buffer)
 
     def _map_scans(self, bag: BagReader) -> OccupancyGrid:
-        for chunk in iter_posed_scan_chunks(bag, self.options.topic, self.poses):
+        self.scan_stream = ScanStream(bag, self.options.topic, desc="grid")
+        for chunk in posed_scan_chunks(self.scan_stream, self.poses):
             usable = [(item, ranges) for item in chunk if (ranges := self._usable_ranges(item)) is not None]
             if usable:
                 grid = self._cover([item for item, _ in usable], bag.path)
             for item, ranges in usable:
                 self._insert(grid, item, ranges)
+        self.skipped.update(self.scan_stream.skipped)
+        self.scans_total += sum(self.scan_stream.skipped.values())
         if self.grid is None or self.scans_used == 0:
             raise BagtoolsError(self._nothing_posed_message(), bag.path)
         if self.returns_used == 0:
@@ -167,7 +171,7 @@ class GridMapPipeline:
     def _max_range(self, item: PosedScan) -> float:
         scan_max = item.scan.range_max_m
         limit = self.options.max_range_m
-        if not (math.isfinite(scan_max) and scan_max > 0):
+        if not (0 < scan_max < MAX_PLAUSIBLE_RANGE_M):  # no usable range_max in the message
             return limit if limit is not None else math.nan
         return scan_max if limit is None else min(scan_max, limit)
 

@@ -7,6 +7,7 @@ int nanoseconds; quaternions are in ROS order x, y, z, w.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -34,14 +35,24 @@ def stamp_to_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+#: Returns beyond this are not believed, whatever a scan's range_max says (no 2D laser reaches 1 km).
+MAX_PLAUSIBLE_RANGE_M = 1000.0
+#: Cloud points farther than this from their sensor on any axis are damage (or a wrong is_bigendian), not data.
+MAX_PLAUSIBLE_COORDINATE_M = 1.0e5
+
+
 @dataclass(frozen=True)
 class LaserScanArrays:
     """A LaserScan as arrays, in the scan's own frame.
 
     ``ranges_m`` (N,) float32 as recorded (inf/NaN kept); ``angles_rad`` (N,)
     float64, beam i at angle_min + i * angle_increment (read-only, shared
-    between scans of the same geometry); ``valid`` (N,) bool:
-    finite and within [range_min_m, range_max_m].
+    between scans of the same geometry); ``range_min_m`` and ``range_max_m``
+    are the message's limits made sane (at least 0, at most
+    :data:`MAX_PLAUSIBLE_RANGE_M`); ``valid`` (N,) bool: finite, above 0 and
+    within them. ``notes`` says what in the header was implausible and how it
+    was read (empty for a sound scan); the same notes come back for every scan
+    of one geometry, so callers can count them.
     """
 
     stamp_ns: int
@@ -51,11 +62,13 @@ class LaserScanArrays:
     range_min_m: float
     range_max_m: float
     intensities: np.ndarray
+    notes: tuple[str, ...] = ()
 
     @property
     def valid(self) -> np.ndarray:
         r = self.ranges_m
-        return np.isfinite(r) & (r >= self.range_min_m) & (r <= self.range_max_m)
+        with np.errstate(invalid="ignore"):
+            return (r > 0) & (r >= self.range_min_m) & (r <= self.range_max_m)
 
     def points_xy(self) -> np.ndarray:
         """(M,2) float64 x, y of the valid returns in the scan frame, metres."""
@@ -73,28 +86,68 @@ def _beam_angles(angle_min_rad: float, increment_rad: float, n: int) -> np.ndarr
     return angles
 
 
+@lru_cache(maxsize=64)
+def _scan_geometry(angle_min: float, increment: float, angle_max: float, n: int, range_min: float,
+                   range_max: float) -> tuple[np.ndarray, float, float, tuple[str, ...]]:
+    """Beam angles, sane range limits and notes for one LaserScan geometry; raises DecodeError if unusable."""
+    if not (math.isfinite(angle_min) and math.isfinite(increment)):
+        raise DecodeError(f"LaserScan angle_min {angle_min} or angle_increment {increment} is not finite")
+    if n > 1 and increment == 0.0:
+        raise DecodeError(f"LaserScan angle_increment is 0: all {n} beams would point the same way")
+    notes: list[str] = []
+    span = increment * (n - 1)
+    if n > 1 and abs(span) > 2 * math.pi * 1.01:
+        notes.append(f"beams span {abs(span):.3g} rad, more than a full turn (angle_increment {increment:.4g})")
+    header_span = angle_max - angle_min
+    if n > 1 and math.isfinite(header_span) and header_span * increment < 0 and abs(header_span) > abs(increment):
+        notes.append(f"angle_increment {increment:.4g} has the opposite sign of angle_max - angle_min "
+                     f"({header_span:.4g}); beams placed at angle_min + i * angle_increment, as ROS defines them")
+    low = range_min if math.isfinite(range_min) and range_min > 0 else 0.0
+    if not math.isfinite(range_min) or range_min < 0:
+        notes.append(f"range_min {range_min:.4g} m is not a distance; returns of 0 m or less are ignored")
+    high = range_max if math.isfinite(range_max) else MAX_PLAUSIBLE_RANGE_M
+    if not (high <= MAX_PLAUSIBLE_RANGE_M):
+        high = MAX_PLAUSIBLE_RANGE_M
+    if not (math.isfinite(range_max) and range_max <= MAX_PLAUSIBLE_RANGE_M):
+        notes.append(f"range_max {range_max:.4g} m is implausible; returns beyond {MAX_PLAUSIBLE_RANGE_M:.0f} m are ignored")
+    elif high <= low:
+        notes.append(f"range_max {range_max:.4g} m is not above range_min {range_min:.4g} m: no return is valid")
+    return _beam_angles(angle_min, increment, n), low, high, tuple(notes)
+
+
 def decode_laserscan(msg: Any) -> LaserScanArrays:
-    """sensor_msgs/LaserScan -> :class:`LaserScanArrays` (ranges are not copied)."""
+    """sensor_msgs/LaserScan -> :class:`LaserScanArrays` (ranges are not copied).
+
+    Raises :class:`DecodeError` for a geometry no beam can be placed by
+    (non-finite angle_min or angle_increment, a zero increment).
+    """
     ranges = np.asarray(msg.ranges, dtype=np.float32)
-    angles = _beam_angles(float(msg.angle_min), float(msg.angle_increment), ranges.size)
+    angles, low, high, notes = _scan_geometry(float(msg.angle_min), float(msg.angle_increment), float(msg.angle_max),
+                                              int(ranges.size), float(msg.range_min), float(msg.range_max))
     return LaserScanArrays(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         frame_id=msg.header.frame_id,
         ranges_m=ranges,
         angles_rad=angles,
-        range_min_m=float(msg.range_min),
-        range_max_m=float(msg.range_max),
+        range_min_m=low,
+        range_max_m=high,
         intensities=np.asarray(msg.intensities, dtype=np.float32),
+        notes=notes,
     )
 
 
 @dataclass(frozen=True)
 class CloudArrays:
-    """A PointCloud2's finite x, y, z points: ``points`` (N,3) float32 in ``frame_id``."""
+    """A PointCloud2's finite x, y, z points: ``points`` (N,3) float32 in ``frame_id``.
+
+    ``n_implausible`` counts finite points dropped for a coordinate beyond
+    :data:`MAX_PLAUSIBLE_COORDINATE_M` (damage, or data of the other byte order).
+    """
 
     stamp_ns: int
     frame_id: str
     points: np.ndarray
+    n_implausible: int = 0
 
 
 def _xyz_view(msg: Any) -> np.ndarray:
@@ -123,6 +176,10 @@ def _xyz_view(msg: Any) -> np.ndarray:
     if row_step != width * point_step:  # padded rows: drop the padding, row by row in one reshape
         data = data[: height * row_step].reshape(height, row_step)[:, : width * point_step].reshape(-1)
     offsets = [int(fields[n].offset) for n in "xyz"]
+    for name, offset, kind in zip("xyz", offsets, kinds):
+        if offset < 0 or offset + int(kind[1:]) > point_step:
+            raise DecodeError(f"PointCloud2 field {name} at offset {offset} ({kind[1:]} bytes) does not fit in "
+                              f"point_step {point_step}")
     if kinds[0] == kinds[1] == kinds[2] and offsets == [offsets[0], offsets[0] + int(kinds[0][1:]), offsets[0] + 2 * int(kinds[0][1:])]:
         dtype = np.dtype({"names": ["xyz"], "formats": [(order + kinds[0], 3)], "offsets": [offsets[0]], "itemsize": point_step})
         return np.frombuffer(data, dtype=dtype, count=n_points)["xyz"]
@@ -135,16 +192,25 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
     """sensor_msgs/PointCloud2 -> :class:`CloudArrays` with (N,3) float32 points.
 
     Honours ``fields`` (x, y, z at any offsets and numeric types), ``point_step``,
-    ``row_step`` padding and ``is_bigendian``. Points with a non-finite coordinate
-    are dropped unless ``keep_nan`` (then the result is height*width points).
+    ``row_step`` padding and ``is_bigendian``. Points with a non-finite or
+    implausible coordinate are dropped unless ``keep_nan`` (then the result is
+    height*width points). Raises :class:`DecodeError` for a layout the data
+    cannot hold.
     """
     xyz = _xyz_view(msg)
+    n_implausible = 0
     if not keep_nan:
         # Per-column tests and an index gather: about 3x faster than isfinite(xyz).all(1) and a
-        # boolean mask on the strided (N,3) view of a padded cloud.
-        finite = np.isfinite(xyz[:, 0]) & np.isfinite(xyz[:, 1]) & np.isfinite(xyz[:, 2])
-        xyz = xyz.take(np.flatnonzero(finite), axis=0)
-    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, np.asarray(xyz, dtype=np.float32))
+        # boolean mask on the strided (N,3) view of a padded cloud. NaN fails the test too.
+        limit = MAX_PLAUSIBLE_COORDINATE_M
+        with np.errstate(invalid="ignore"):
+            keep = (np.abs(xyz[:, 0]) <= limit) & (np.abs(xyz[:, 1]) <= limit) & (np.abs(xyz[:, 2]) <= limit)
+        if not keep.all():
+            rest = xyz[~keep]
+            n_implausible = int(np.isfinite(rest).all(axis=1).sum())
+        xyz = xyz.take(np.flatnonzero(keep), axis=0)
+    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, np.asarray(xyz, dtype=np.float32),
+                       n_implausible)
 
 
 @dataclass(frozen=True)

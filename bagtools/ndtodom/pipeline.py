@@ -50,10 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
+from bagtools.dataset import ScanStream, require_topic
 from bagtools.errors import BagtoolsError
-from bagtools.io import (
-    LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, TfArrays, TfCollector, decode_laserscan, decode_odometry, open_bag,
-)
+from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, TfArrays, TfCollector, decode_odometry, open_bag
 from bagtools.ndt import MIN_SCAN_POINTS, NdtReference, match_scans
 from bagtools.ndt.grid import CELL_MODELS
 from bagtools.progress import progress
@@ -196,12 +195,7 @@ class NdtOdomPipeline:
     # -- steps -------------------------------------------------------------------
 
     def _require_scan_topic(self, bag: BagReader) -> None:
-        topic = self.options.topic
-        if topic not in bag.topics:
-            scans = [t.name for t in bag.topics.values() if t.msgtype in LASERSCAN_TYPES]
-            hint = f"LaserScan topics: {', '.join(scans)}; choose one with --topic" if scans else "the bag has no LaserScan topic"
-            raise BagtoolsError(f"no scan topic '{topic}' in the bag ({hint})", bag.path)
-        bag.require_topic(topic, LASERSCAN_TYPES)
+        require_topic(bag, self.options.topic, LASERSCAN_TYPES, "LaserScan")
 
     def _load_odometry(self, bag: BagReader) -> None:
         """Build the tf buffer (with /odom added when tf lacks it) and pick the odometry and base frames."""
@@ -246,26 +240,14 @@ class NdtOdomPipeline:
         """Stamps (N,) int64 and valid points (M_k,2) of the usable scans, in bag order."""
         stamps: list[int] = []
         points: list[np.ndarray] = []
-        backwards_first: int | None = None
-        total = bag.topics[self.options.topic].count
-        for rec in progress(bag.messages([self.options.topic]), total=total, desc="reading scans", unit="scan"):
-            scan = decode_laserscan(rec.msg)
+        stream = ScanStream(bag, self.options.topic, increasing=True, min_returns=MIN_SCAN_POINTS, desc="reading scans")
+        for item in stream:
             if not self.scan_frame:
-                self.scan_frame = scan.frame_id.lstrip("/")
-            if stamps and scan.stamp_ns <= stamps[-1]:
-                self.skipped["stamp not after the previous scan"] += 1
-                backwards_first = scan.stamp_ns if backwards_first is None else backwards_first
-                continue
-            xy = scan.points_xy()
-            if len(xy) < MIN_SCAN_POINTS:
-                self.skipped[f"fewer than {MIN_SCAN_POINTS} valid ranges"] += 1
-                continue
-            stamps.append(scan.stamp_ns)
-            points.append(xy)
-        if backwards_first is not None:
-            n = self.skipped["stamp not after the previous scan"]
-            self.warnings.append(f"{n} scan(s) on {self.options.topic} skipped: header stamp not after the previous "
-                                 f"scan's (time going backwards), first at {backwards_first / 1e9:.9f} s")
+                self.scan_frame = item.scan.frame_id.lstrip("/")
+            stamps.append(item.scan.stamp_ns)
+            points.append(item.scan.points_xy())
+        self.skipped.update(stream.skipped)
+        self.warnings.extend(stream.warnings())
         return np.asarray(stamps, dtype=np.int64), points
 
     def _scan_offset(self, stamps: np.ndarray) -> None:

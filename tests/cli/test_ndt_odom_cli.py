@@ -47,7 +47,7 @@ def test_missing_bag_and_missing_topic_exit_2(tmp_path: Path) -> None:
     assert missing.returncode == 2 and missing.stderr.strip() == f"bagtools: {tmp_path / 'nope'}: no such file or directory"
     wrong = _run("ndt-odom", str(FIXTURES / "sim_lap_cloud_20s"), "--out", str(tmp_path / "o"), "--topic", "/front")
     assert wrong.returncode == 2
-    assert "no scan topic '/front' in the bag (LaserScan topics: /scan; choose one with --topic)" in wrong.stderr
+    assert "no topic '/front' in the bag (LaserScan topics: /scan; choose one with --topic)" in wrong.stderr
     assert not (tmp_path / "o").exists()
 
 

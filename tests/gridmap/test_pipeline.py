@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from bagtools.errors import BagtoolsError
-from bagtools.gridmap import NO_SCAN_TRANSFORM_WARNING, GridMapOptions, GridMapPipeline
+from bagtools.dataset import NO_SCAN_TRANSFORM_WARNING
+from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.simtruth import anchor_frame_in_map, read_ground_truth
 from bagtools.trajectory import Trajectory, write_tum

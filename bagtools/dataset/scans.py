@@ -1,0 +1,226 @@
+"""The laser scans and point clouds of a bag, decoded, checked and counted: the one dataset reader.
+
+Every command that consumes sensor data (map-cloud, grid, ndt-odom, slam) reads
+it here, in bag order, the way KISS-ICP's datasets feed its pipeline:
+
+- :class:`ScanStream` yields the LaserScans of one topic as
+  :class:`~bagtools.io.LaserScanArrays`. A scan whose header places no beam
+  (non-finite or zero angle_increment) is skipped; with ``increasing`` a scan
+  whose stamp is not after the previous one is skipped; with ``min_returns`` a
+  scan with fewer valid returns is skipped. Every skip is counted by reason and
+  every implausible header value (negative range_min, infinite range_max, an
+  increment of the wrong sign) is counted by kind, and :meth:`ScanStream.warnings`
+  says both in one line per kind.
+- :class:`SensorStream` yields the points of a PointCloud2 or LaserScan topic,
+  (N,3) in the sensor frame, with the same counting.
+- :func:`posed_scan_chunks` attaches poses from a
+  :class:`~bagtools.dataset.poses.ScanPoseSource` to chunks of scans (one
+  vectorized lookup per chunk and scan frame).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from bagtools.dataset.poses import ScanPoseSource
+from bagtools.errors import TopicError
+from bagtools.io import (
+    LASERSCAN_TYPES,
+    POINTCLOUD2_TYPES,
+    BagReader,
+    LaserScanArrays,
+    decode_laserscan,
+    decode_pointcloud2,
+)
+from bagtools.io.decode import DecodeError
+from bagtools.progress import progress
+
+SKIP_BACKWARDS = "stamp not after the previous scan"
+CHUNK_SCANS = 256
+"""Scans posed per batch lookup."""
+
+
+def require_topic(bag: BagReader, topic: str, msgtypes: tuple[str, ...], what: str) -> None:
+    """Raise :class:`TopicError` naming the topics of the wanted types when ``topic`` is missing or of another type."""
+    if topic not in bag.topics:
+        fits = [t.name for t in bag.topics.values() if t.msgtype in msgtypes]
+        hint = f"{what} topics: {', '.join(fits)}; choose one with --topic" if fits else f"the bag has no {what} topic"
+        raise TopicError(f"no topic '{topic}' in the bag ({hint})", bag.path)
+    bag.require_topic(topic, msgtypes)
+
+
+@dataclass(frozen=True, slots=True)
+class ScanMessage:
+    """One usable LaserScan and its bag (log) time in ns."""
+
+    log_time_ns: int
+    scan: LaserScanArrays
+
+
+class ScanStream:
+    """The usable LaserScans of ``topic`` in bag order (see the module docstring).
+
+    Args:
+        bag: an open bag.
+        topic: a sensor_msgs/LaserScan topic (TopicError otherwise).
+        increasing: skip scans whose header stamp is not after the previous usable one.
+        min_returns: skip scans with fewer valid returns than this.
+        desc: progress-bar label (None: no bar).
+    """
+
+    def __init__(self, bag: BagReader, topic: str, *, increasing: bool = False, min_returns: int = 0,
+                 desc: str | None = "scans") -> None:
+        require_topic(bag, topic, LASERSCAN_TYPES, "LaserScan")
+        self.bag = bag
+        self.topic = topic
+        self.increasing = increasing
+        self.min_returns = min_returns
+        self.desc = desc
+        self.total = bag.topics[topic].count
+        self.read = 0
+        self.skipped: Counter[str] = Counter()
+        self.notes: Counter[str] = Counter()
+        self.frame_ids: set[str] = set()
+        self._first_backwards_ns: int | None = None
+
+    def __iter__(self) -> Iterator[ScanMessage]:
+        last_ns: int | None = None
+        records = self.bag.messages([self.topic])
+        if self.desc is not None:
+            records = progress(records, total=self.total, desc=self.desc, unit="scan")
+        for rec in records:
+            self.read += 1
+            try:
+                scan = decode_laserscan(rec.msg)
+            except DecodeError as err:
+                self.skipped[f"unusable header: {err.problem}"] += 1
+                continue
+            self.notes.update(scan.notes)
+            if self.increasing and last_ns is not None and scan.stamp_ns <= last_ns:
+                self.skipped[SKIP_BACKWARDS] += 1
+                if self._first_backwards_ns is None:
+                    self._first_backwards_ns = scan.stamp_ns
+                continue
+            if self.min_returns and int(np.count_nonzero(scan.valid)) < self.min_returns:
+                self.skipped[f"fewer than {self.min_returns} valid ranges"] += 1
+                continue
+            self.frame_ids.add(scan.frame_id)
+            last_ns = scan.stamp_ns
+            yield ScanMessage(rec.log_time_ns, scan)
+
+    def warnings(self) -> list[str]:
+        """One line per kind of skipped scan and per kind of implausible header value, with counts."""
+        out = []
+        for reason, n in self.skipped.items():
+            if reason == SKIP_BACKWARDS:
+                out.append(f"{n} scan(s) on {self.topic} skipped: header stamp not after the previous scan's "
+                           f"(time going backwards), first at {self._first_backwards_ns / 1e9:.9f} s")
+            elif reason.startswith("unusable header"):
+                out.append(f"{n} scan(s) on {self.topic} skipped: {reason}")
+        for note, n in self.notes.items():
+            out.append(f"{self.topic}: {note} ({n} scan(s))")
+        return out
+
+
+@dataclass(frozen=True)
+class SensorPoints:
+    """One message's points: ``points`` (N,3) float32 in ``frame_id`` at header ``stamp_ns``; ``log_time_ns`` is its bag time."""
+
+    stamp_ns: int
+    log_time_ns: int
+    frame_id: str
+    points: np.ndarray
+
+
+class SensorStream:
+    """The points of every PointCloud2 or LaserScan message on ``topic``, in bag order.
+
+    A LaserScan gives its valid returns at z = 0 of the scan frame (through a
+    :class:`ScanStream`); a PointCloud2 its finite, plausible points. Messages
+    that cannot be decoded are skipped and counted; :meth:`warnings` says so.
+    """
+
+    def __init__(self, bag: BagReader, topic: str, desc: str | None = "mapping") -> None:
+        require_topic(bag, topic, POINTCLOUD2_TYPES + LASERSCAN_TYPES, "PointCloud2 or LaserScan")
+        self.bag = bag
+        self.topic = topic
+        self.desc = desc
+        self.is_scan = bag.topics[topic].msgtype in LASERSCAN_TYPES
+        self.scans = ScanStream(bag, topic, desc=desc) if self.is_scan else None
+        self.total = bag.topics[topic].count
+        self.skipped: Counter[str] = Counter()
+        self.implausible_points = 0
+
+    def __iter__(self) -> Iterator[SensorPoints]:
+        if self.scans is not None:
+            for item in self.scans:
+                xy = item.scan.points_xy()
+                points = np.zeros((xy.shape[0], 3), dtype=np.float32)
+                points[:, :2] = xy
+                yield SensorPoints(item.scan.stamp_ns, item.log_time_ns, item.scan.frame_id, points)
+            return
+        records: Iterable = self.bag.messages([self.topic])
+        if self.desc is not None:
+            records = progress(records, total=self.total, desc=self.desc, unit="cloud")
+        for rec in records:
+            try:
+                cloud = decode_pointcloud2(rec.msg)
+            except DecodeError as err:
+                self.skipped[f"undecodable cloud: {err.problem}"] += 1
+                continue
+            self.implausible_points += cloud.n_implausible
+            yield SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points)
+
+    @property
+    def skip_counts(self) -> Counter[str]:
+        return self.scans.skipped if self.scans is not None else self.skipped
+
+    def warnings(self) -> list[str]:
+        """One line per kind of skipped message or dropped point, with counts."""
+        if self.scans is not None:
+            return self.scans.warnings()
+        out = [f"{n} cloud(s) on {self.topic} skipped: {reason}" for reason, n in self.skipped.items()]
+        if self.implausible_points:
+            out.append(f"{self.implausible_points} point(s) on {self.topic} dropped: a coordinate beyond "
+                       "1e5 m (damaged data, or is_bigendian set wrong)")
+        return out
+
+
+@dataclass(frozen=True)
+class PosedScan:
+    """One scan and where it was taken.
+
+    ``T_frame_scan`` (4,4) is the scan frame's pose in the map's frame (NaN when
+    unknown); ``skip_reason`` is '' when the pose is known, else why not.
+    """
+
+    scan: LaserScanArrays
+    T_frame_scan: np.ndarray
+    skip_reason: str
+
+
+def _pose_chunk(scans: list[LaserScanArrays], poses: ScanPoseSource) -> list[PosedScan]:
+    stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    frames = np.array([s.frame_id for s in scans], dtype=object)
+    T = np.empty((len(scans), 4, 4))
+    reasons = np.empty(len(scans), dtype=object)
+    for frame_id in dict.fromkeys(frames):
+        rows = np.flatnonzero(frames == frame_id)
+        T[rows], reasons[rows] = poses.lookup(str(frame_id), stamps[rows])
+    return [PosedScan(scan, T[i], str(reasons[i])) for i, scan in enumerate(scans)]
+
+
+def posed_scan_chunks(scans: ScanStream, poses: ScanPoseSource, chunk_scans: int = CHUNK_SCANS) -> Iterator[list[PosedScan]]:
+    """Yield the scans of ``scans`` with their poses, in bag order, ``chunk_scans`` at a time."""
+    chunk: list[LaserScanArrays] = []
+    for item in scans:
+        chunk.append(item.scan)
+        if len(chunk) == chunk_scans:
+            yield _pose_chunk(chunk, poses)
+            chunk = []
+    if chunk:
+        yield _pose_chunk(chunk, poses)
