@@ -132,6 +132,8 @@ def _run(args: list[str]) -> int:
     except BrokenPipeError:
         return 0
     except BagtoolsError as exc:
+        if exc.path is None:  # an option's value: name the input it was given for
+            exc.path = _input_name(args)
         click.echo(f"bagtools: {exc}", err=True)
         return 2
     except OSError as exc:

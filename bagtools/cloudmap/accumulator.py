@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from bagtools.errors import BagtoolsError
+
 
 def random_subset(points: np.ndarray, fraction: float, rng: np.random.Generator) -> np.ndarray:
     """Keep round(fraction * N) points chosen at random without replacement (MATLAB pcdownsample 'random')."""
@@ -15,12 +17,24 @@ def random_subset(points: np.ndarray, fraction: float, rng: np.random.Generator)
     return points[index]
 
 
+#: Smallest voxel edge accepted, metres (a tenth of a millimetre: far below any sensor's noise).
+MIN_VOXEL_M = 1e-4
+
+
 def voxel_downsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """Average the points in each voxel of edge ``voxel_m`` (Open3D's voxel_down_sample)."""
+    """Average the points in each voxel of edge ``voxel_m`` (Open3D's voxel_down_sample).
+
+    Raises :class:`BagtoolsError` when the points span more voxels per axis
+    than Open3D can index (32-bit voxel coordinates).
+    """
     import open3d as o3d
 
     if points.shape[0] == 0:
         return points
+    span_m = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    if not span_m / voxel_m < np.iinfo(np.int32).max:
+        raise BagtoolsError(f"--voxel {voxel_m:g} m is too small for a map spanning {span_m:.4g} m "
+                            f"(Open3D indexes at most {np.iinfo(np.int32).max} voxels per axis)")
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points.astype(np.float64)))
     return np.asarray(cloud.voxel_down_sample(voxel_m).points, dtype=np.float32)
 

@@ -11,6 +11,7 @@ streams the sensor topic, so memory is bounded by the map, not by the bag:
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -18,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from bagtools.cloudmap.accumulator import PointAccumulator, random_subset
+from bagtools.cloudmap.accumulator import MIN_VOXEL_M, PointAccumulator, random_subset
 from bagtools.dataset import SensorStream
 from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
@@ -55,10 +56,12 @@ class CloudMapOptions:
     def __post_init__(self) -> None:
         if self.sample is not None and not 0.0 < self.sample <= 1.0:
             raise BagtoolsError(f"--sample must be in (0, 1], got {self.sample}")
-        if self.voxel_m is not None and self.voxel_m <= 0:
-            raise BagtoolsError(f"--voxel must be positive, got {self.voxel_m}")
-        if self.max_range_m is not None and self.max_range_m <= 0:
-            raise BagtoolsError(f"--max-range must be positive, got {self.max_range_m}")
+        if self.voxel_m is not None and not (math.isfinite(self.voxel_m) and self.voxel_m >= MIN_VOXEL_M):
+            raise BagtoolsError(f"--voxel must be a number of metres of at least {MIN_VOXEL_M:g}, got {self.voxel_m}")
+        if self.max_range_m is not None and not (math.isfinite(self.max_range_m) and self.max_range_m > 0):
+            raise BagtoolsError(f"--max-range must be a positive number of metres, got {self.max_range_m}")
+        if self.seed < 0:
+            raise BagtoolsError(f"--seed must be a non-negative integer, got {self.seed}")
         if self.stamp not in ("message", "latest"):
             raise BagtoolsError(f"--stamp must be 'message' or 'latest', got {self.stamp!r}")
 

@@ -12,6 +12,9 @@ POSES_GROUND_TRUTH = "ground-truth"
 
 MAX_GRID_CELLS = 100_000_000
 """The largest grid the pipeline builds (10^8 cells, 400 MB of float32 log-odds): a bad pose must not allocate more."""
+MIN_RESOLUTION = 0.1
+MAX_RESOLUTION = 1000.0
+"""Cells per metre accepted by --resolution (cells of 10 m to 1 mm)."""
 
 
 @dataclass(frozen=True)
@@ -36,8 +39,9 @@ class GridMapOptions:
     max_cells: int = MAX_GRID_CELLS
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise BagtoolsError(f"--resolution must be a positive number of cells per metre, got {self.resolution}")
+        if not (math.isfinite(self.resolution) and MIN_RESOLUTION <= self.resolution <= MAX_RESOLUTION):
+            raise BagtoolsError(f"--resolution must be between {MIN_RESOLUTION:g} and {MAX_RESOLUTION:g} cells per metre "
+                                f"(cells of 10 m to 1 mm), got {self.resolution}")
         if self.max_range_m is not None and not (math.isfinite(self.max_range_m) and self.max_range_m > 0):
             raise BagtoolsError(f"--max-range must be a positive number of metres, got {self.max_range_m}")
         if not self.frame or self.frame.startswith("/"):

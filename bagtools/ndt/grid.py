@@ -38,6 +38,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bagtools.limits import check_memory
+
 #: A cell needs this many reference points to get a normal distribution.
 MIN_POINTS_PER_CELL = 3
 #: The smallest covariance eigenvalue is raised to this fraction of the largest.
@@ -51,6 +53,8 @@ RESIDUAL_COVARIANCE_FACTOR = 2.0
 
 # Columns of NdtReference.table.
 _MX, _MY, _IA, _IB, _IC, _W = range(6)
+
+_BYTES_PER_CELL = 14 * 8  # the table's six rows and the bincounts, float64, per cell of each grid
 
 
 def finite_points(points: np.ndarray, what: str) -> np.ndarray:
@@ -116,7 +120,11 @@ class NdtReference:
             lo, hi = pts.min(axis=0), pts.max(axis=0)
         # Empty border cells (one ring below, two above): out-of-box lookups are clipped onto them.
         origins = lo[None, :] - shifts - cell
-        nx, ny = (np.floor((hi - lo + half) / cell).astype(np.int64) + 4).tolist()
+        extent = np.floor((hi - lo + half) / cell) + 4
+        check_memory(4 * float(extent[0]) * float(extent[1]) * _BYTES_PER_CELL,
+                     f"NDT grids of {cell:g} m cells over {hi[0] - lo[0]:.4g} m x {hi[1] - lo[1]:.4g} m",
+                     "use larger cells")
+        nx, ny = extent.astype(np.int64).tolist()
         n_per_grid = nx * ny
         total = 4 * n_per_grid
 

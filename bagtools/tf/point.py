@@ -10,13 +10,14 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from bagtools.outputs import OutputDir
+from bagtools.outputs import OutputDir, check_outputs
 from bagtools.tf.buffer import TfBuffer, format_stamp
 from bagtools.tf.exceptions import ExtrapolationException
 from bagtools.tf.sampling import sample_stamps
@@ -26,6 +27,9 @@ DEFAULT_TARGETS = ("map", "odom", "base_footprint")
 """Default target frames; a bag without base_footprint gets base_link as the robot's frame instead."""
 OUTPUT_NAMES = ["point.csv", "point.png", "summary.json"]
 
+
+MAX_POINT_COORDINATE_M = 1.0e5
+"""A followed point farther than this from its frame's origin is refused (damage, or a typo)."""
 
 @dataclass(frozen=True)
 class FixedPoint:
@@ -168,6 +172,7 @@ def read_clicked_points(bag: str | Path, topic: str) -> tuple[TfBuffer, list[Fix
 
     collector = TfCollector()
     points: list[FixedPoint] = []
+    not_finite = 0
     with open_bag(bag) as reader:
         collector.check(reader)
         reader.require_topic(topic, POINT_TYPES)
@@ -176,14 +181,20 @@ def read_clicked_points(bag: str | Path, topic: str) -> tuple[TfBuffer, list[Fix
             if rec.topic == topic:
                 p = rec.msg.point
                 frame = rec.msg.header.frame_id.lstrip("/")
+                if not all(math.isfinite(v) and abs(v) <= MAX_POINT_COORDINATE_M for v in (p.x, p.y, p.z)):
+                    not_finite += 1
+                    continue
                 points.append(FixedPoint(frame, (float(p.x), float(p.y), float(p.z)), stamp_to_ns(rec.msg.header.stamp)))
             else:
                 collector.add(rec)
         span, path, reader_warnings = (reader.start_ns, reader.end_ns), str(reader.path), list(reader.warnings)
     if not points:
-        raise BagtoolsError(f"topic '{topic}' has no messages", path)
+        why = f" with a finite point ({not_finite} non-finite or beyond 1e5 m)" if not_finite else ""
+        raise BagtoolsError(f"topic '{topic}' has no messages{why}", path)
     buffer = TfBuffer.from_arrays(*collector.arrays(), skip_invalid=True, repair_spikes=True)
     buffer.path, buffer.bag_span_ns = path, span
+    if not_finite:
+        reader_warnings.append(f"skipped {not_finite} point(s) on {topic} with a non-finite coordinate or one beyond 1e5 m")
     buffer.warnings[:0] = reader_warnings
     return buffer, points
 
@@ -200,6 +211,11 @@ def follow_point_bag(bag: str | Path, out_dir: str | Path, point: tuple[float, f
     """
     if (point is None) == (topic is None) or (point is not None and not frame):
         raise BagtoolsError("give either --point X Y Z with --frame F, or --topic", bag)
+    if point is not None and not all(math.isfinite(v) and abs(v) <= MAX_POINT_COORDINATE_M for v in point):
+        raise BagtoolsError(f"--point must be three finite coordinates within 1e5 m, got {point}", bag)
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise BagtoolsError(f"--rate must be a positive number of Hz, got {rate_hz}", bag)
+    check_outputs(out_dir, OUTPUT_NAMES, force)  # before the work, not after it
     if topic is not None:
         buffer, points = read_clicked_points(bag, topic)
     else:

@@ -128,7 +128,7 @@ def test_scans_outside_the_tf_data_say_why(tmp_path: Path, capsys) -> None:
 @pytest.mark.parametrize(
     ("args", "fragments"),
     [
-        (["--resolution", "0"], ["--resolution must be a positive number of cells per metre, got 0.0"]),
+        (["--resolution", "0"], ["--resolution must be between 0.1 and 1000 cells per metre (cells of 10 m to 1 mm), got 0.0"]),
         (["--max-range", "-1"], ["--max-range must be a positive number of metres, got -1.0"]),
         (["--poses", "ground-truth", "--frame", "odom"], ["--poses ground-truth gives poses in the map frame"]),
         (["--poses", "nowhere.tum"], ["nowhere.tum: no such trajectory file"]),
