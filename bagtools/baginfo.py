@@ -15,6 +15,7 @@ import numpy as np
 from bagtools.io import TfCollector, open_bag
 from bagtools.progress import progress
 from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
+from bagtools.tf.repair import tf_conflicts
 
 
 @dataclass(frozen=True)
@@ -89,8 +90,9 @@ def describe_bag(path: str | Path) -> BagDescription:
             freq = (stamps.size - 1) / span_s if stamps.size > 1 and span_s > 0 else 0.0
             topics.append(TopicSummary(name, info.msgtype, int(stamps.size), float(freq),
                                        int(stamps.min()) if stamps.size else 0, int(stamps.max()) if stamps.size else 0))
+        dynamic, static = collector.arrays()
         return BagDescription(str(bag.path), bag.kind, bag.start_ns, bag.end_ns, sum(t.count for t in topics),
-                              topics, frame_infos(*collector.arrays()), list(bag.warnings))
+                              topics, frame_infos(dynamic, static), list(bag.warnings) + tf_conflicts(dynamic, static))
 
 
 def format_description(desc: BagDescription) -> str:

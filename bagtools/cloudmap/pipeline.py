@@ -24,7 +24,7 @@ from bagtools.dataset import SensorStream
 from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
-from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes, guess_base_frame
+from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
 
 StampMode = Literal["message", "latest"]
@@ -109,8 +109,9 @@ class CloudMapPipeline:
             self.warnings = list(dict.fromkeys(list(bag.warnings) + self.warnings + self.stream.warnings()))
             if self.clouds_used == 0:
                 reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.items()) or "no messages"
+                invalid = self.buffer.invalid_note(*sorted(self.buffer.invalid_dropped))
                 raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
-                                    f"({reasons}), so there is no map to write", bag.path)
+                                    f"({reasons}), so there is no map to write{invalid}", bag.path)
             points = self.accumulator.points()
             if points.shape[0] == 0:
                 limit = f" within --max-range {self.options.max_range_m} m" if self.options.max_range_m is not None else ""
@@ -128,7 +129,7 @@ class CloudMapPipeline:
         collector.read(bag)
         dynamic, static = collector.arrays()
         arrival_ns = collector.dynamic_arrival_ns()
-        dynamic, kept = drop_translation_spikes(dynamic, self.warnings)
+        dynamic, kept = repair_dynamic_tf(dynamic, self.warnings)
         arrival_ns = arrival_ns[kept]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         self._arrival = _ArrivalIndex(dynamic, arrival_ns)

@@ -39,7 +39,7 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
-from bagtools.tf.repair import drop_translation_spikes, guess_base_frame
+from bagtools.tf.repair import repair_dynamic_tf, guess_base_frame
 from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks
 from bagtools.io import LASERSCAN_TYPES, BagReader, open_bag, read_tf_arrays
 from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
@@ -99,7 +99,7 @@ class GridMapPipeline:
 
     def _load_tf(self, bag: BagReader) -> None:
         dynamic, static = read_tf_arrays(bag)
-        dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
+        dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         if self.options.poses_kind != POSES_TF:
             return
@@ -237,7 +237,7 @@ class GridMapPipeline:
         scan_frames = ", ".join(sorted(self.scan_frames))
         known = ", ".join(self.buffer.frames) or "none"
         return (f"none of the {self.scans_total} scans on {topic} could be used in frame '{frame}' ({reasons}); "
-                f"scan frame {scan_frames}, tf frames: {known}")
+                f"scan frame {scan_frames}, tf frames: {known}{self.buffer.invalid_note(*sorted(self.buffer.invalid_dropped))}")
 
     def _evaluate(self, bag: BagReader, grid: OccupancyGrid) -> dict:
         """For a simulated bag: the map against the true world rasterized at the map's cells.

@@ -58,7 +58,7 @@ from bagtools.ndt.grid import CELL_MODELS
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
-from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, drop_translation_spikes
+from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf
 from bagtools.trajectory import Trajectory, ape_translation, rpe_translation
 from bagtools.transforms import pose2tform, tform2pose
 
@@ -222,7 +222,7 @@ class NdtOdomPipeline:
             edge = (parents == self.odom_frame) & (children == self.base_frame)
             if edge.any():
                 self.odometry_source = f"/tf {self.odom_frame} -> {self.base_frame}"
-                dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
+                dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
             elif odom_samples:
                 n = len(odom_samples)
                 dynamic = TfArrays.concatenate([dynamic, TfArrays(
@@ -230,7 +230,7 @@ class NdtOdomPipeline:
                     np.array([s.stamp_ns for s in odom_samples], dtype=np.int64),
                     np.array([s.position_m for s in odom_samples]), np.array([s.orientation_xyzw for s in odom_samples]))])
                 self.odometry_source = f"{ODOM_TOPIC} ({self.odom_frame} -> {self.base_frame})"
-                dynamic = drop_translation_spikes(dynamic, self.warnings)[0]
+                dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
         try:
             self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
         except BagtoolsError as err:

@@ -208,6 +208,7 @@ class TfBuffer:
         self._frames: list[_Frame] = []
         self.path: str | None = None       # the bag the buffer came from, for error messages
         self.warnings: list[str] = []      # transforms skipped by from_bag / from_arrays(skip_invalid=True)
+        self.invalid_dropped: dict[str, int] = {}   # frame -> transforms of it skipped as invalid (NaN, zero quaternion)
         self.bag_span_ns: tuple[int, int] | None = None   # (start_ns, end_ns) of the bag, set by from_bag
 
     # ------------------------------------------------------------------ loading
@@ -246,9 +247,9 @@ class TfBuffer:
         """
         buffer = cls()
         if repair_spikes and dynamic is not None:
-            from bagtools.tf.repair import drop_translation_spikes
+            from bagtools.tf.repair import repair_dynamic_tf
 
-            dynamic = drop_translation_spikes(dynamic, buffer.warnings)[0]
+            dynamic = repair_dynamic_tf(dynamic, buffer.warnings)[0]
         for arrays, is_static in ((static, True), (dynamic, False)):
             if arrays is not None and len(arrays):
                 buffer._set(arrays.parent, arrays.child, arrays.stamp_ns, arrays.translation, arrays.rotation_xyzw,
@@ -303,6 +304,10 @@ class TfBuffer:
                     f"at {format_stamp(int(stamps[i]))}: {reason}", self.path)
             self.warnings.append(f"skipped {int(new.sum())} transform(s) ({reason}), "
                                  f"e.g. {parents[i]!r} -> {children[i]!r} at {format_stamp(int(stamps[i]))}")
+            for name in set(children[new].tolist()) | set(parents[new].tolist()):
+                if name:
+                    count = int(np.count_nonzero((children[new] == name) | (parents[new] == name)))
+                    self.invalid_dropped[name] = self.invalid_dropped.get(name, 0) + count
             bad |= new
         if bad.any():
             keep = ~bad
@@ -378,8 +383,15 @@ class TfBuffer:
                 self.path)
         frame_id = self._ids.get(frame)
         if frame_id is None:
-            raise LookupException(f"\"{frame}\" passed to {argument} does not exist. {self._known_frames()}", self.path)
+            raise LookupException(f"\"{frame}\" passed to {argument} does not exist{self.invalid_note(frame)}. "
+                                  f"{self._known_frames()}", self.path)
         return frame_id
+
+    def invalid_note(self, *frames: str) -> str:
+        """Why a frame may be missing or cut off: its transforms were invalid and dropped when loading."""
+        notes = [f"{self.invalid_dropped[f]} transform(s) of '{f}' were invalid (NaN, infinite or a zero quaternion) "
+                 "and dropped" for f in frames if self.invalid_dropped.get(f)]
+        return f" ({'; '.join(notes)})" if notes else ""
 
     def _known_frames(self) -> str:
         names = self.frames
@@ -695,7 +707,8 @@ class TfBuffer:
         return ConnectivityException(
             f"Could not find a connection between '{self._frames[target_id].name}' and "
             f"'{self._frames[source_id].name}' because they are not part of the same tree."
-            "Tf has two or more unconnected trees.", self.path)
+            "Tf has two or more unconnected trees."
+            + self.invalid_note(*sorted(self.invalid_dropped)), self.path)
 
     def _exception(self, failure: _Failure, target_id: int, source_id: int):
         if failure.kind == "connectivity":

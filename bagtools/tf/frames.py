@@ -76,6 +76,10 @@ def _describe(info: FrameInfo, origin_ns: int | None) -> str:
     return f"dynamic, {info.rate_hz:.1f} Hz, {info.count} samples, {span}{extra}"
 
 
+#: Deeper levels of the drawn tree are not indented further (a 3000-frame chain must not draw 12 kB lines).
+MAX_INDENT_LEVELS = 32
+
+
 def render_tree(infos: list[FrameInfo], origin_ns: int | None = None) -> str:
     """Draw the frames as an indented tree, roots first, children sorted by name.
 
@@ -89,19 +93,20 @@ def render_tree(infos: list[FrameInfo], origin_ns: int | None = None) -> str:
     roots = sorted({f.parent for f in infos} - children)
     lines: list[str] = []
     seen: set[str] = set()
-
-    def walk(frame: str, prefix: str) -> None:
-        kids = sorted(by_parent.get(frame, []), key=lambda f: f.child)
-        for i, info in enumerate(kids):
-            last = i == len(kids) - 1
-            lines.append(f"{prefix}{'└── ' if last else '├── '}{info.child}  ({_describe(info, origin_ns)})")
-            if info.child not in seen:
-                seen.add(info.child)
-                walk(info.child, prefix + ("    " if last else "│   "))
-
-    for root in roots:
+    for root in roots:  # depth first with an explicit stack: a chain thousands of frames deep is fine
         lines.append(root)
-        walk(root, "")
+        stack = [(info, "", i == 0) for i, info in enumerate(sorted(by_parent.get(root, []), key=lambda f: f.child,
+                                                                   reverse=True))]
+        while stack:
+            info, prefix, last = stack.pop()
+            shown = prefix if len(prefix) <= 4 * MAX_INDENT_LEVELS else prefix[:4 * MAX_INDENT_LEVELS] + "… "
+            lines.append(f"{shown}{'└── ' if last else '├── '}{info.child}  ({_describe(info, origin_ns)})")
+            if info.child in seen:
+                continue
+            seen.add(info.child)
+            kids = sorted(by_parent.get(info.child, []), key=lambda f: f.child, reverse=True)
+            child_prefix = prefix + ("    " if last else "│   ")
+            stack.extend((kid, child_prefix, i == 0) for i, kid in enumerate(kids))
     orphans = children - seen
     if orphans:  # frames in a loop of parents, which tf2 would reject at lookup
         lines.append("frames in a parent loop: " + ", ".join(sorted(orphans)))

@@ -1,8 +1,12 @@
 """Repairs for the tf data of real recordings, shared by every command that replays a bag.
 
 - Corrupt samples: a real TurtleBot3 bag holds odometry at 1e22..1e32 m for a few
-  samples (a serial link corrupting messages); one such sample would ruin every
-  pose after it. :func:`drop_translation_spikes` removes such isolated leaps.
+  samples (a serial link corrupting messages), and smaller glitches (a coordinate
+  zeroed, a yaw flipped); one such sample would ruin every pose after it. Two
+  publishers may also write one edge (a second odometry source near zero) or
+  publish one stamp twice. :func:`repair_dynamic_tf` removes the corrupt samples
+  and keeps one publisher, and says so; :func:`tf_conflicts` reports the same
+  findings for ``info`` and ``tf frames``.
 - A missing laser mount: some bags have no base -> scan transform; commands then
   take the scan frame to be the base frame and say so with
   :data:`NO_SCAN_TRANSFORM_WARNING`.
@@ -11,6 +15,7 @@
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -44,42 +49,277 @@ def translation_spike_mask(dynamic: TfArrays, window: int = SPIKE_WINDOW, speed_
     """
     keep = np.ones(len(dynamic), dtype=bool)
     dropped: Counter[tuple[str, str]] = Counter()
-    if len(dynamic) < 3:
-        return keep, dropped
-    parents, parent_id = np.unique(dynamic.parent.astype(str), return_inverse=True)
-    children, child_id = np.unique(dynamic.child.astype(str), return_inverse=True)
-    edges = parent_id.astype(np.int64) * children.size + child_id
-    half = window // 2
-    for edge in np.unique(edges):
-        rows = np.flatnonzero(edges == edge)
-        rows = rows[np.argsort(dynamic.stamp_ns[rows], kind="stable")]
-        if rows.size < 3:
-            continue
-        xyz = dynamic.translation[rows]
-        with np.errstate(invalid="ignore", over="ignore"):
-            median = median_filter(xyz, size=(window, 1), mode="nearest")
-            deviation = np.linalg.norm(xyz - median, axis=1)
-        stamps = dynamic.stamp_ns[rows]
-        k = np.arange(rows.size)
-        span_s = (stamps[np.minimum(k + half, rows.size - 1)] - stamps[np.maximum(k - half, 0)]) / 1e9
-        spike = deviation > np.maximum(min_jump_m, speed_mps * span_s)
-        if spike.any():
-            keep[rows[spike]] = False
-            dropped[(str(parents[edge // children.size]), str(children[edge % children.size]))] += int(spike.sum())
+    for edge, rows in _edges(dynamic).items():
+        leaps = _leaps(dynamic.stamp_ns[rows], dynamic.translation[rows], window, speed_mps, min_jump_m)
+        if leaps.size:
+            keep[rows[leaps]] = False
+            dropped[edge] += int(leaps.size)
     return keep, dropped
 
 
-def drop_translation_spikes(dynamic: TfArrays, warnings: list[str]) -> tuple[TfArrays, np.ndarray]:
-    """Remove the samples :func:`translation_spike_mask` finds, with one warning per repaired edge.
+def _leaps(stamps_ns: np.ndarray, xyz: np.ndarray, window: int = SPIKE_WINDOW, speed_mps: float = SPIKE_SPEED_MPS,
+           min_jump_m: float = SPIKE_MIN_M) -> np.ndarray:
+    """Rows (of one edge, in stamp order) that leap away from the running median faster than anything moves."""
+    n = stamps_ns.size
+    if n < 3:
+        return np.zeros(0, dtype=np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        deviation = np.linalg.norm(xyz - median_filter(xyz, size=(window, 1), mode="nearest"), axis=1)
+    half = window // 2
+    k = np.arange(n)
+    span_s = (stamps_ns[np.minimum(k + half, n - 1)] - stamps_ns[np.maximum(k - half, 0)]) / 1e9
+    return np.flatnonzero(deviation > np.maximum(min_jump_m, speed_mps * span_s))
 
-    Returns the kept transforms and the keep mask (to filter arrays aligned with
-    ``dynamic``, such as arrival times); the warnings are appended to ``warnings``.
+
+def _angle_between(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) between unit quaternions (N,4) (either order, any sign)."""
+    dot = np.abs(np.einsum("ij,ij->i", q1, q2))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def _unit(q: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+@dataclass
+class EdgeFindings:
+    """What :func:`inspect_edge` found on one dynamic (parent, child) edge; ``drop`` indexes rows of the edge."""
+
+    repeated: int = 0  # samples at a stamp the edge already had
+    conflicting: int = 0  # ... of which with another value
+    interleaved: str = ""  # a description of two interleaved publishers, and which one is kept
+    corrupt: int = 0  # leaps faster than anything moves (1e30 m values)
+    glitches: int = 0  # short runs far from the samples around them, which agree
+    drop: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+
+#: A sample farther than this (or this many times the edge's typical nonzero step) from the running median,
+#: in a short run whose neighbours agree, is a glitch.
+GLITCH_MIN_M = 0.05
+GLITCH_MIN_RAD = 0.1
+GLITCH_STEP_FACTOR = 5.0
+#: Glitches that form a coherent path of their own (at least this many) are a second publisher, as are
+#: glitches on more than INTERLEAVED_SHARE of an edge's samples.
+MIN_STREAM_SAMPLES = 10
+INTERLEAVED_SHARE = 0.25
+
+
+def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: np.ndarray) -> EdgeFindings:
+    """Repeated stamps, interleaved publishers, corrupt leaps and glitches on one edge (rows in stamp order).
+
+    In this order, each step on the samples the previous ones kept:
+
+    - A stamp seen before keeps its first sample (tf2 ignores repeated data);
+      it is a conflict when the values differ.
+    - Two publishers interleaved on the edge show as "glitches" that form a
+      coherent path of their own (consecutive ones close together, far from
+      the other samples), or as a path that zig-zags between alternate samples:
+      the two streams are told apart and the one that moves over the larger
+      extent is kept.
+    - Corrupt leaps (:func:`_leaps`: 1e30 m values) are dropped.
+    - A glitch is a short run of samples (up to 3) far from the running median
+      (more than GLITCH_MIN_M / GLITCH_MIN_RAD, and GLITCH_STEP_FACTOR times the
+      edge's typical nonzero step) while the samples on either side of the run
+      agree: a zeroed coordinate, a flipped yaw. A localizer's step correction is
+      not one: the samples around it disagree.
     """
-    keep, dropped = translation_spike_mask(dynamic)
-    for (parent, child), count in dropped.items():
-        warnings.append(f"dropped {count} corrupt /tf samples {parent} -> {child} "
-                        "(translation leaping away from its neighbours and back)")
+    n = stamps_ns.size
+    found = EdgeFindings()
+    rows = np.arange(n)
+    repeated = np.flatnonzero(stamps_ns[1:] == stamps_ns[:-1]) + 1
+    if repeated.size:
+        first = np.searchsorted(stamps_ns, stamps_ns[repeated], side="left")
+        differ = (np.linalg.norm(translation[repeated] - translation[first], axis=1) > 1e-6) | (
+            _angle_between(_unit(rotation_xyzw[repeated]), _unit(rotation_xyzw[first])) > 1e-6)
+        found.repeated, found.conflicting = int(repeated.size), int(differ.sum())
+        rows = np.setdiff1d(rows, repeated)
+    if rows.size >= 5:
+        t, q = translation[rows], _sign_aligned(_unit(rotation_xyzw[rows]))
+        odd = _glitches(t, q)
+        second = _second_stream(stamps_ns[rows], t, odd)
+        if not second and _alternating(t):  # strict turns: every other sample is the other publisher's
+            odd, second = np.arange(1, rows.size, 2), True
+        if second:
+            kept, found.interleaved = _split_streams(stamps_ns[rows], t, odd)
+            rows = rows[kept]
+    leaps = _leaps(stamps_ns[rows], translation[rows])
+    found.corrupt = int(leaps.size)
+    rows = np.delete(rows, leaps)
+    if rows.size >= 5:
+        glitch = _glitches(translation[rows], _sign_aligned(_unit(rotation_xyzw[rows])))
+        found.glitches = int(glitch.size)
+        rows = np.delete(rows, glitch)
+    found.drop = np.setdiff1d(np.arange(n), rows)
+    return found
+
+
+def _sign_aligned(q: np.ndarray) -> np.ndarray:
+    """Quaternions flipped to the hemisphere of their predecessor (q and -q are one rotation)."""
+    out = q.copy()
+    flip = np.einsum("ij,ij->i", out[1:], out[:-1]) < 0
+    sign = np.where(np.cumsum(flip) % 2 == 1, -1.0, 1.0)
+    out[1:] *= sign[:, None]
+    return out
+
+
+def _glitches(t: np.ndarray, q: np.ndarray, window: int = SPIKE_WINDOW, max_run: int = 3) -> np.ndarray:
+    """Rows of short runs (up to ``max_run``) that leave the running median while the samples around the run agree."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        step_t = np.linalg.norm(np.diff(t, axis=0), axis=1)
+        step_r = _angle_between(q[1:], q[:-1])
+        limit_t = max(GLITCH_MIN_M, GLITCH_STEP_FACTOR * _typical_step(step_t))
+        limit_r = max(GLITCH_MIN_RAD, GLITCH_STEP_FACTOR * _typical_step(step_r))
+        dev_t = np.linalg.norm(t - median_filter(t, size=(window, 1), mode="nearest"), axis=1)
+        q_med = _unit(median_filter(q, size=(window, 1), mode="nearest"))
+        dev_r = _angle_between(q, q_med)
+    off = (dev_t > limit_t) | (dev_r > limit_r)
+    if not off.any():
+        return np.zeros(0, dtype=np.int64)
+    edges = np.diff(np.concatenate(([0], off.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # run = rows start..end-1
+    out = []
+    for start, end in zip(starts.tolist(), ends.tolist()):  # a loop over runs, not samples
+        if end - start > max_run or start == 0 or end == len(t):
+            continue
+        before, after = start - 1, end
+        agree_t = np.linalg.norm(t[after] - t[before]) <= max(limit_t, dev_t[start:end].max() / 4)
+        agree_r = _angle_between(q[after:after + 1], q[before:before + 1])[0] <= max(limit_r, dev_r[start:end].max() / 4)
+        if agree_t and agree_r:
+            out.extend(range(start, end))
+    return np.asarray(out, dtype=np.int64)
+
+
+def _typical_step(steps: np.ndarray) -> float:
+    """The median of the steps that move at all: a localizer holding its pose between corrections has many zero
+    steps, and its corrections, not the zeros, are what a glitch must stand out from."""
+    moving = steps[steps > 1e-9]
+    return float(np.median(moving)) if moving.size else 0.0
+
+
+def _second_stream(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> bool:
+    """Whether the glitch rows ``odd`` are another publisher's samples rather than damage."""
+    if odd.size < MIN_STREAM_SAMPLES:
+        return False
+    if odd.size > INTERLEAVED_SHARE * t.shape[0]:
+        return True
+    main = np.setdiff1d(np.arange(t.shape[0]), odd)
+    nearest = main[np.clip(np.searchsorted(stamps_ns[main], stamps_ns[odd]), 0, main.size - 1)]
+    with np.errstate(invalid="ignore"):
+        to_main = float(np.nanmedian(np.linalg.norm(t[odd] - t[nearest], axis=1)))
+        along = float(np.nanmedian(np.linalg.norm(np.diff(t[odd], axis=0), axis=1)))
+    return along < 0.25 * to_main
+
+
+def _alternating(t: np.ndarray) -> bool:
+    """Two publishers taking turns: the path zig-zags far more than its even and odd samples each move."""
+    with np.errstate(invalid="ignore"):
+        whole = float(np.nansum(np.linalg.norm(np.diff(t, axis=0), axis=1)))
+        halves = sum(float(np.nansum(np.linalg.norm(np.diff(t[k::2], axis=0), axis=1))) for k in (0, 1))
+    return whole > 1.0 and whole > 4.0 * halves
+
+
+def _split_streams(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> tuple[np.ndarray, str]:
+    """Two interleaved streams: the ``odd`` rows and the rest.
+
+    Returns the rows of the stream kept (the one whose positions span more) and a description.
+    """
+    n = stamps_ns.size
+    a = np.zeros(n, dtype=bool)
+    a[odd] = True
+    streams = [np.flatnonzero(a), np.flatnonzero(~a)]
+
+    def span_m(rows: np.ndarray) -> float:  # robust: a few samples of the other stream may be mixed in
+        if not rows.size:
+            return 0.0
+        lo, hi = np.nanpercentile(t[rows], [5, 95], axis=0)
+        return float(np.linalg.norm(hi - lo))
+
+    def rate_hz(rows: np.ndarray) -> float:
+        dur = (stamps_ns[rows[-1]] - stamps_ns[rows[0]]) / 1e9 if rows.size > 1 else 0.0
+        return (rows.size - 1) / dur if dur > 0 else 0.0
+
+    streams.sort(key=span_m, reverse=True)
+    kept, dropped = streams
+    text = (f"two publishers interleaved: kept {kept.size} samples ({rate_hz(kept):.1f} Hz, spanning "
+            f"{span_m(kept):.3g} m), dropped {dropped.size} ({rate_hz(dropped):.1f} Hz, spanning {span_m(dropped):.3g} m)")
+    return kept, text
+
+
+def repair_dynamic_tf(dynamic: TfArrays, warnings: list[str]) -> tuple[TfArrays, np.ndarray]:
+    """The repairs every command applies to recorded /tf, with one warning per repaired edge and kind.
+
+    Per edge, :func:`inspect_edge`'s findings are dropped. Returns the kept
+    transforms and the keep mask (to filter arrays aligned with ``dynamic``,
+    such as arrival times).
+    """
+    keep = np.ones(len(dynamic), dtype=bool)
+    for (parent, child), rows in _edges(dynamic).items():
+        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows])
+        keep[rows[found.drop]] = False
+        warnings.extend(describe_findings(parent, child, found, repaired=True))
     return (dynamic if keep.all() else dynamic.select(keep)), keep
+
+
+def describe_findings(parent: str, child: str, found: EdgeFindings, repaired: bool) -> list[str]:
+    """One line per kind of finding on the edge (``repaired``: say what was dropped)."""
+    out = []
+    edge = f"/tf {parent} -> {child}"
+    if found.conflicting:
+        out.append(f"{edge}: {found.conflicting} stamp(s) published twice with different values "
+                   f"(two publishers?){'; kept the first of each' if repaired else ''}")
+    elif found.repeated and repaired:
+        out.append(f"{edge}: ignored {found.repeated} repeated sample(s) at a stamp already seen")
+    if found.interleaved:
+        text = found.interleaved if repaired else found.interleaved.split(": kept")[0]
+        out.append(f"{edge}: {text}")
+    if found.corrupt:
+        out.append(f"dropped {found.corrupt} corrupt /tf samples {parent} -> {child} "
+                   "(translation leaping away from its neighbours and back)" if repaired else
+                   f"{edge}: {found.corrupt} corrupt sample(s) (translation leaping away and back)")
+    if found.glitches:
+        out.append(f"{edge}: {'dropped ' if repaired else ''}{found.glitches} isolated glitch(es) (samples far from "
+                   "those around them, which agree: a zeroed coordinate or a flipped yaw)")
+    return out
+
+
+def _edges(dynamic: TfArrays, keep: np.ndarray | None = None) -> dict[tuple[str, str], np.ndarray]:
+    """(parent, child) -> row indexes in stamp order (stable), leading '/' stripped; rows not in ``keep`` left out."""
+    if len(dynamic) == 0:
+        return {}
+    parents = np.array([p.lstrip("/") for p in dynamic.parent.astype(str)], dtype=object)
+    children = np.array([c.lstrip("/") for c in dynamic.child.astype(str)], dtype=object)
+    pairs = np.char.add(np.char.add(parents.astype(str), "\x1f"), children.astype(str))
+    names, inverse = np.unique(pairs, return_inverse=True)
+    out = {}
+    for k, name in enumerate(names):
+        rows = np.flatnonzero(inverse == k)
+        if keep is not None:
+            rows = rows[keep[rows]]
+        rows = rows[np.argsort(dynamic.stamp_ns[rows], kind="stable")]
+        parent, child = str(name).split("\x1f")
+        out[(parent, child)] = rows
+    return out
+
+
+def tf_conflicts(dynamic: TfArrays, static: TfArrays) -> list[str]:
+    """What is wrong with a bag's tf, for ``info`` and ``tf frames``: frames with two parents, and per edge
+    conflicting stamps, glitches and interleaved publishers (as :func:`repair_dynamic_tf` would find them)."""
+    out = []
+    for arrays, topic in ((dynamic, "/tf"), (static, "/tf_static")):
+        if not len(arrays):
+            continue
+        parents_of: dict[str, set[str]] = {}
+        for parent, child in zip(arrays.parent.astype(str), arrays.child.astype(str)):
+            parents_of.setdefault(child.lstrip("/"), set()).add(parent.lstrip("/"))
+        for child, parents in sorted(parents_of.items()):
+            if len(parents) > 1:
+                out.append(f"{topic}: frame {child} has {len(parents)} parents ({', '.join(sorted(parents))}); "
+                           "tf2 keeps one at a time, so lookups through it depend on which was published last")
+    for (parent, child), rows in _edges(dynamic).items():
+        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows])
+        out.extend(describe_findings(parent, child, found, repaired=False))
+    return out
 
 
 def guess_base_frame(bag: BagReader, known_frames: set[str] | list[str], explicit: str | None = None) -> str | None:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
+from bagtools.tf.repair import tf_conflicts
 
 
 @dataclass(frozen=True)
@@ -15,7 +16,8 @@ class FrameTree:
     ``origin_ns`` is the earliest header stamp of a dynamic transform (the bag
     start if there is none): times are shown relative to it, since header
     stamps (e.g. simulation time) need not match the bag's recording clock.
-    ``warnings`` are the reader's (e.g. a truncated MCAP read up to the cut).
+    ``warnings`` are the reader's (e.g. a truncated MCAP read up to the cut) and
+    what is wrong with the tf data (see :func:`bagtools.tf.repair.tf_conflicts`).
     """
 
     path: str
@@ -36,4 +38,5 @@ def read_frame_tree(bag: str | Path) -> FrameTree:
         dynamic, static = read_tf_arrays(reader)
         infos = frame_infos(dynamic, static)
         firsts = [f.first_ns for f in infos if not f.is_static]
-        return FrameTree(str(reader.path), min(firsts) if firsts else int(reader.start_ns), infos, list(reader.warnings))
+        warnings = list(reader.warnings) + tf_conflicts(dynamic, static)
+        return FrameTree(str(reader.path), min(firsts) if firsts else int(reader.start_ns), infos, warnings)

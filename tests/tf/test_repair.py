@@ -1,17 +1,17 @@
-"""Repairs of recorded tf data: corrupt samples."""
+"""Repairs of recorded tf data: corrupt samples, glitches, repeated stamps, interleaved publishers."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from bagtools.io import TfArrays
-from bagtools.tf.repair import drop_translation_spikes, translation_spike_mask
+from bagtools.tf.repair import inspect_edge, repair_dynamic_tf, tf_conflicts, translation_spike_mask
 
 T0 = 1_700_000_000_000_000_000
 S = 1_000_000_000
 
 
-def test_drop_translation_spikes() -> None:
+def test_corrupt_leaps_dropped_and_steps_kept() -> None:
     n = 50
     stamps = T0 + np.arange(n, dtype=np.int64) * S // 10
     xyz = np.column_stack([np.arange(n) * 0.02, np.zeros(n), np.zeros(n)])
@@ -23,7 +23,7 @@ def test_drop_translation_spikes() -> None:
     keep, dropped = translation_spike_mask(arrays)
     assert dropped == {("odom", "base_link"): 3}
     warnings: list[str] = []
-    kept, keep_again = drop_translation_spikes(arrays, warnings)
+    kept, keep_again = repair_dynamic_tf(arrays, warnings)
     assert np.array_equal(keep, keep_again)
     assert warnings == ["dropped 3 corrupt /tf samples odom -> base_link (translation leaping away from its neighbours and back)"]
     assert len(kept) == n - 3 and np.abs(kept.translation).max() < 2.0
@@ -54,3 +54,94 @@ def test_from_arrays_repairs_only_when_asked() -> None:
     repaired = TfBuffer.from_arrays(arrays, repair_spikes=True)
     assert abs(repaired.lookup("odom", "base", int(arrays.stamp_ns[7]))[0, 3] - 0.14) < 1e-9
     assert repaired.warnings == ["dropped 1 corrupt /tf samples odom -> base (translation leaping away from its neighbours and back)"]
+
+
+def edge(xyz: np.ndarray, yaw: np.ndarray | None = None, stamps: np.ndarray | None = None,
+         parent: str = "odom", child: str = "base_link") -> TfArrays:
+    n = len(xyz)
+    yaw = np.zeros(n) if yaw is None else yaw
+    q = np.column_stack([np.zeros(n), np.zeros(n), np.sin(yaw / 2), np.cos(yaw / 2)])
+    stamps = T0 + np.arange(n, dtype=np.int64) * S // 20 if stamps is None else stamps
+    return TfArrays(np.array([parent] * n, dtype=object), np.array([child] * n, dtype=object), stamps,
+                    np.asarray(xyz, dtype=float), q)
+
+
+def driving(n: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) / 20.0
+    xyz = np.column_stack([3.0 + 0.2 * t, 1.0 + 0.05 * np.sin(t), np.zeros(n)])
+    return xyz, 0.1 * t
+
+
+def test_glitches_zeroed_coordinates_and_flipped_yaw_are_dropped() -> None:
+    xyz, yaw = driving()
+    xyz[50, 0] = 0.0                 # one coordinate zeroed
+    xyz[90:92, 1] = 0.0              # two in a row
+    yaw[130] += np.radians(170)      # a yaw flipped for one sample
+    warnings: list[str] = []
+    kept, keep = repair_dynamic_tf(edge(xyz, yaw), warnings)
+    assert np.flatnonzero(~keep).tolist() == [50, 90, 91, 130]
+    assert warnings == ["/tf odom -> base_link: dropped 4 isolated glitch(es) (samples far from those around them, "
+                        "which agree: a zeroed coordinate or a flipped yaw)"]
+
+
+def test_localizer_corrections_are_not_glitches() -> None:
+    rng = np.random.default_rng(0)
+    n = 300
+    holds = np.repeat(rng.normal(0, 0.05, size=(n // 3, 3)), 3, axis=0)  # a pose held, corrected every 3 samples
+    holds[:, 2] = 0
+    found = inspect_edge(T0 + np.arange(n, dtype=np.int64) * S // 5, holds + [-2.0, -0.5, 0.0],
+                         np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+    assert found.drop.size == 0
+
+
+def test_repeated_stamps_keep_the_first_and_conflicts_are_said() -> None:
+    xyz, yaw = driving(40)
+    stamps = T0 + np.arange(40, dtype=np.int64) * S // 20
+    stamps[11] = stamps[10]                    # the same value twice: repeated data
+    xyz[11] = xyz[10]
+    yaw[11] = yaw[10]
+    stamps[21], xyz[21] = stamps[20], xyz[20] + [0.4, 0, 0]   # another value at the same stamp: a conflict
+    warnings: list[str] = []
+    kept, keep = repair_dynamic_tf(edge(xyz, yaw, stamps), warnings)
+    assert np.flatnonzero(~keep).tolist() == [11, 21]
+    assert any("1 stamp(s) published twice with different values" in w for w in warnings)
+    assert any("published twice" in w for w in tf_conflicts(edge(xyz, yaw, stamps), TfArrays.empty()))
+
+
+def test_two_interleaved_publishers_keep_the_one_that_moves() -> None:
+    moving, yaw = driving(100)                                     # 20 Hz, driving
+    stamps_moving = T0 + np.arange(100, dtype=np.int64) * S // 20
+    stamps_zero = T0 + 1 + np.arange(1000, dtype=np.int64) * S // 200   # 200 Hz, near zero
+    zero = np.random.default_rng(1).normal(0, 1e-3, size=(1000, 3))
+    both = TfArrays.concatenate([edge(moving, yaw, stamps_moving), edge(zero, np.zeros(1000), stamps_zero)])
+    warnings: list[str] = []
+    kept, keep = repair_dynamic_tf(both, warnings)
+    assert keep[:100].sum() >= 95 and keep[100:].sum() == 0
+    assert len(warnings) == 1 and "two publishers interleaved: kept" in warnings[0] and "20.0 Hz" in warnings[0]
+
+
+def test_alternating_publishers_detected() -> None:
+    a, yaw = driving(100)
+    b = a.copy()
+    b[:, 0] += 2.0
+    xyz = np.empty((200, 3))
+    xyz[0::2], xyz[1::2] = a, b
+    found = inspect_edge(T0 + np.arange(200, dtype=np.int64) * S // 40, xyz, np.tile([0.0, 0.0, 0.0, 1.0], (200, 1)))
+    assert "two publishers interleaved" in found.interleaved and found.drop.size == 100
+
+
+def test_two_parents_reported() -> None:
+    xyz, yaw = driving(10)
+    both = TfArrays.concatenate([edge(xyz, yaw, parent="odom"), edge(xyz, yaw, parent="odom_alt")])
+    assert any("frame base_link has 2 parents (odom, odom_alt)" in w for w in tf_conflicts(both, TfArrays.empty()))
+
+
+def test_real_turtlebot_glitches_found(real_dir) -> None:
+    from bagtools.io import open_bag, read_tf_arrays
+
+    with open_bag(real_dir / "turtlebot3_real_lidar_odom.bag") as bag:
+        dynamic, static = read_tf_arrays(bag)
+    report = tf_conflicts(dynamic, static)
+    assert any("8 corrupt" in w for w in report) and any("isolated glitch" in w for w in report)
+    with open_bag(real_dir / "nav2_turtlebot.mcap") as bag:  # AMCL corrections are not glitches
+        assert tf_conflicts(*read_tf_arrays(bag)) == []
