@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bagtools.errors import BagError
-from bagtools.io import BagReader, decode_odometry
+from bagtools.io import ODOMETRY_TYPES, BagReader, decode_odometry
 from bagtools.transforms import quat2tform, xyzw2quat
 
 if TYPE_CHECKING:
@@ -46,21 +46,35 @@ def load_sim_world(bag: BagReader) -> World | None:
     return World.from_dict(info["world"], path=bag.path)
 
 
-def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC) -> tuple[np.ndarray, np.ndarray, str] | None:
-    """The true poses of a simulated bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
+def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
+                      warnings: list[str] | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """The reference poses of a bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
 
-    Read from nav_msgs/Odometry on ``topic`` (the pose of base_footprint in map).
+    Read from nav_msgs/Odometry on ``topic`` (the pose of the base in map).
+    Samples with a non-finite value, a quaternion far from unit length or a
+    stamp seen before are dropped, and said in ``warnings`` when given; None
+    when no sample is left.
     """
-    if topic not in bag.topics:
+    if topic not in bag.topics or bag.topics[topic].msgtype not in ODOMETRY_TYPES:
         return None
     samples = [decode_odometry(rec.msg) for rec in bag.messages([topic])]
     if not samples:
         return None
     stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
-    T = quat2tform(xyzw2quat(np.array([s.orientation_xyzw for s in samples])))
-    T[:, :3, 3] = np.array([s.position_m for s in samples])
-    order = np.argsort(stamps, kind="stable")
-    return stamps[order], T[order], samples[0].child_frame_id
+    xyz = np.array([s.position_m for s in samples])
+    q = np.array([s.orientation_xyzw for s in samples])
+    with np.errstate(invalid="ignore", over="ignore"):
+        ok = np.isfinite(xyz).all(axis=1) & np.isfinite(q).all(axis=1) & (np.abs(np.linalg.norm(q, axis=1) - 1) < 0.01)
+    order = np.flatnonzero(ok)[np.argsort(stamps[ok], kind="stable")]
+    order = order[np.r_[True, np.diff(stamps[order]) > 0]] if order.size else order
+    if warnings is not None and order.size < len(samples):
+        warnings.append(f"{topic}: dropped {len(samples) - order.size} of {len(samples)} poses (non-finite, not a unit "
+                        "quaternion, or a repeated stamp)")
+    if order.size == 0:
+        return None
+    T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))
+    T[:, :3, 3] = xyz[order]
+    return stamps[order], T, samples[0].child_frame_id
 
 
 def anchor_frame_in_map(T_map_base: np.ndarray, T_frame_base: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, int] | None:

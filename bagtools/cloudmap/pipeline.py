@@ -197,7 +197,7 @@ class CloudMapPipeline:
         T_map_frame = np.eye(4)
         result: dict = {}
         if self.options.frame != "map":
-            truth = read_ground_truth(bag)
+            truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 return {}
             stamps, T_map_base, base = truth

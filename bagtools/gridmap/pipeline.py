@@ -120,7 +120,7 @@ class GridMapPipeline:
             self.base_frame = self._base_frame(bag)
             return TfScanPoses(self.buffer, opts.frame, self.base_frame)
         if opts.poses_kind == POSES_GROUND_TRUTH:
-            truth = read_ground_truth(bag)
+            truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 raise BagtoolsError("--poses ground-truth needs a /ground_truth topic (written by bagtools simulate)",
                                     bag.path)
@@ -261,7 +261,7 @@ class GridMapPipeline:
         result: dict = {}
         T_map_frame = np.eye(4)
         if self.options.frame != "map":
-            truth = read_ground_truth(bag)
+            truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 return {}
             stamps, T_map_base, base = truth

@@ -357,7 +357,7 @@ class NdtOdomPipeline:
 
     def _evaluate(self, bag: BagReader, trajectory: Trajectory, odometry: Trajectory | None) -> tuple[Trajectory | None, dict]:
         """Ground truth in the odometry frame, anchored at the first scan, and the errors of NDT and odometry."""
-        truth = read_ground_truth(bag)
+        truth = read_ground_truth(bag, warnings=self.warnings)
         if truth is None:
             return None, {}
         stamps_gt, T_map_gt, gt_child = truth

@@ -58,14 +58,30 @@ def write_tum(path: str | Path, trajectory: Trajectory, force: bool = False) -> 
     return write_text_atomic(path, tum_text(trajectory), force)
 
 
+#: Positions farther than this from the origin are damage, not a robot's path (metres).
+MAX_TUM_COORDINATE_M = 1.0e6
+#: Stamps after this (the year 2286) are damage, not a recording's clock (int ns).
+MAX_TUM_STAMP_NS = 10_000_000_000 * 1_000_000_000
+
+
 def read_tum(path: str | Path) -> Trajectory:
-    """Read a TUM file (comments with '#' allowed); raises BagtoolsError naming the file and line."""
+    """Read a TUM file (comments with '#' allowed); raises BagtoolsError naming the file and line.
+
+    Refused: lines without 8 numbers, non-finite values, positions beyond
+    :data:`MAX_TUM_COORDINATE_M`, stamps that are negative or beyond the year
+    2286, quaternions that are not unit length, and stamps that go backwards
+    or repeat.
+    """
     path = Path(path)
     if not path.is_file():
         raise BagtoolsError("no such trajectory file", path)
+    try:
+        text_lines = path.read_text(encoding="utf-8").splitlines()
+    except (UnicodeDecodeError, OSError) as err:
+        raise BagtoolsError(f"not a TUM text file ({err.__class__.__name__})", path) from err
     stamps: list[int] = []
     rows: list[list[float]] = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
+    for number, line in enumerate(text_lines, start=1):
         text = line.split("#", 1)[0].strip()
         if not text:
             continue
@@ -73,13 +89,18 @@ def read_tum(path: str | Path) -> Trajectory:
         if len(fields) != 8:
             raise BagtoolsError(f"line {number}: expected 8 values 'stamp x y z qx qy qz qw', got {len(fields)}", path)
         try:
-            whole, _, frac = fields[0].partition(".")
-            if whole.startswith("-"):
-                raise ValueError(f"negative stamp {fields[0]}")
-            stamps.append(int(whole or "0") * 1_000_000_000 + int((frac + "000000000")[:9]))
+            stamps.append(_stamp_ns(fields[0]))
             rows.append([float(v) for v in fields[1:]])
         except ValueError as err:
             raise BagtoolsError(f"line {number}: not a number ({err})", path) from err
+        if not all(np.isfinite(rows[-1])) or max(abs(v) for v in rows[-1][:3]) > MAX_TUM_COORDINATE_M:
+            raise BagtoolsError(f"line {number}: values must be finite, positions within {MAX_TUM_COORDINATE_M:g} m "
+                                f"(got {' '.join(fields[1:])})", path)
+        if stamps[-1] > MAX_TUM_STAMP_NS:
+            raise BagtoolsError(f"line {number}: stamp {fields[0]} s is past the year 2286 (not a clock)", path)
+        if len(stamps) > 1 and stamps[-1] <= stamps[-2]:
+            raise BagtoolsError(f"line {number}: stamp {fields[0]} s is not after the previous one (time going "
+                                "backwards or repeated)", path)
     if not rows:
         raise BagtoolsError("trajectory file holds no poses", path)
     values = np.array(rows)
@@ -88,3 +109,16 @@ def read_tum(path: str | Path) -> Trajectory:
         bad = int(np.flatnonzero(np.abs(norms - 1.0) > 1e-3)[0])
         raise BagtoolsError(f"pose {bad + 1} has a quaternion of norm {norms[bad]:.4f}, not 1", path)
     return Trajectory.from_xyz_xyzw(np.array(stamps, dtype=np.int64), values[:, :3], values[:, 3:])
+
+
+def _stamp_ns(text: str) -> int:
+    """A TUM stamp in seconds ('1700000000.123456789', '1.7e9') as int ns, exact for plain decimals."""
+    whole, dot, frac = text.partition(".")
+    if text.startswith("-"):
+        raise ValueError(f"negative stamp {text}")
+    if whole.isdigit() and (not dot or frac.isdigit() or frac == ""):
+        return int(whole) * 1_000_000_000 + int((frac + "000000000")[:9])
+    seconds = float(text)  # exponent notation
+    if not np.isfinite(seconds) or seconds < 0 or seconds > MAX_TUM_STAMP_NS / 1e9:
+        raise ValueError(f"stamp {text} is not a time in seconds")
+    return int(round(seconds * 1e9))
