@@ -1,0 +1,540 @@
+"""Correlative scan matching over a search window, the MATLAB ``matchScansGrid`` way.
+
+The reference (one scan or a local map of several scans, in the reference
+frame) becomes a likelihood raster: cells of side ``resolution_m`` holding
+exp(-d^2 / (2 sigma^2)), d the distance from the cell's centre to the nearest
+cell hit by a reference point, and 0 beyond 3 sigma (E. Olson, "Real-time
+correlative scan matching", ICRA 2009). The values are stored as integers
+(uint16, 65535 = likelihood 1) so every score is an exact integer sum: the
+branch and bound and the exhaustive search agree bit for bit, ties included.
+
+A candidate is a pose of the discretized window around ``initial_pose``: x and
+y in steps of ``resolution_m`` and theta in steps of the angular resolution.
+Its score is the mean raster value at the current points moved by it, each
+point looked up in the cell it falls in. For each candidate angle the points
+are rotated and binned once; a translation by whole cells only shifts the cell
+indices, so all translations of one angle are gathers from the same raster.
+
+The search is the multi-resolution branch and bound of W. Hess et al., "Real-time
+loop closure in 2D LIDAR SLAM", ICRA 2016: level k of a precomputed stack of
+rasters holds at each cell the maximum of the raster over the 2^k x 2^k cells
+above and to the right of it, so scoring a node (an angle and a 2^k x 2^k block
+of translations) at level k bounds the score of every candidate in it from above.
+Nodes are expanded best-first (highest bound first), in vectorized batches,
+until no open node's bound can beat the best candidate found; the result is the
+exact best candidate of the window (ties go to the first candidate in the order
+theta, x, y, lowest step first), the same as :func:`match_scans_grid` with
+``method="exhaustive"``.
+
+Pose convention, as :func:`bagtools.ndt.match_scans`: the pose [x, y, theta]
+(m, m, rad) is the pose of the current scan's frame in the reference frame,
+``p_ref = R(theta) p_cur + [x, y]``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from bagtools.ndt.grid import finite_points
+from bagtools.ndt.matcher import MIN_SCAN_POINTS, ranges_to_points
+
+#: Raster value of likelihood 1 (the raster is uint16).
+RASTER_MAX = 65535
+#: The likelihood kernel is cut to 0 beyond this many sigmas.
+KERNEL_CUTOFF_SIGMAS = 3.0
+#: Memory guard: at most this many raster cells over all precomputed levels (2 bytes each).
+MAX_RASTER_CELLS = 64_000_000
+#: Memory guard: at most this many rotated points (candidate angles x current points, 8 bytes each).
+MAX_ROTATED_POINTS = 16_000_000
+#: The coarsest precomputed level covers 2^this cells square (Cartographer uses 7 levels).
+MAX_DEPTH = 7
+#: Half-width, in window steps, of the neighbourhood of the best candidate that the covariance is computed from.
+COVARIANCE_HALF_WIDTH = 3
+METHODS = ("branch_and_bound", "exhaustive")
+# Per-point log-likelihood of a raster value (floored at the kernel cutoff), for the covariance.
+_LOG_LIKELIHOOD = np.maximum(np.log(np.maximum(np.arange(RASTER_MAX + 1), 0.5) / RASTER_MAX),
+                             -0.5 * KERNEL_CUTOFF_SIGMAS**2)
+# Best-first batches: expand at least this many open nodes per step, and at most this fraction of them.
+_MIN_BATCH = 32
+_BATCH_FRACTION = 0.25
+# Gathers are done in chunks of about this many lookups to bound temporary memory.
+_CHUNK_LOOKUPS = 1 << 21
+
+
+@dataclass
+class _Pyramid:
+    """Max-pooled levels 0..depth of a reference raster padded with zeros, flattened."""
+
+    depth: int
+    pad_lo: np.ndarray  # (2,) zero cells added below the raster along x and y
+    pad_hi: np.ndarray  # (2,) zero cells added above
+    shape: tuple[int, int]
+    levels: np.ndarray  # ((depth + 1) * shape[0] * shape[1],) uint16; level k at k * P + ix * shape[1] + iy
+
+
+@dataclass(frozen=True, eq=False)
+class CorrelativeReference:
+    """The likelihood raster of a reference scan or local map; build with :meth:`from_points`.
+
+    Build it once to match many scans against the same reference (loop closure
+    against a submap): the max-pooled levels of the branch and bound are also
+    kept and reused while later searches need no larger ones.
+
+    Attributes:
+        resolution_m: side of a raster cell, metres (also the translation step of the search).
+        sigma_m: standard deviation of the likelihood kernel, metres.
+        n_points: finite reference points used.
+        origin: (2,) reference-frame x, y (m) of the lower-left corner of raster cell (0, 0).
+        raster: (nx, ny) uint16 likelihood * 65535 (``RASTER_MAX``), indexed [ix, iy];
+            cell (ix, iy) spans origin + [ix, ix + 1) * resolution in x, likewise in y.
+    """
+
+    resolution_m: float
+    sigma_m: float
+    n_points: int
+    origin: np.ndarray
+    raster: np.ndarray
+    _pyramid: list = field(default_factory=list, repr=False)
+
+    @classmethod
+    def from_points(cls, points_m: np.ndarray, resolution_m: float = 0.05,
+                    sigma_m: float | None = None) -> CorrelativeReference:
+        """The likelihood raster of (N, 2) reference points (m, reference frame; non-finite rows dropped).
+
+        ``sigma_m`` (default: ``resolution_m``) is the spread of the likelihood
+        around each point, metres. Several scans (a local map) are passed as
+        their points moved into the reference frame and stacked.
+
+        Raises:
+            ValueError: on a bad shape or parameter, or a raster above ``MAX_RASTER_CELLS``.
+        """
+        res = _positive(resolution_m, "resolution_m")
+        sigma = res if sigma_m is None else _positive(sigma_m, "sigma_m")
+        pts = finite_points(points_m, "reference points")
+        if len(pts) == 0:
+            return cls(res, sigma, 0, np.zeros(2), np.zeros((1, 1), np.uint16))
+        cutoff = KERNEL_CUTOFF_SIGMAS * sigma
+        margin = int(math.ceil(cutoff / res)) + 1
+        cells = np.floor(pts / res)
+        lo = cells.min(axis=0) - margin
+        shape = cells.max(axis=0) - lo + margin + 1
+        if float(shape[0]) * float(shape[1]) > MAX_RASTER_CELLS:
+            raise ValueError(f"the reference raster would need {shape[0]:.0f} x {shape[1]:.0f} cells, above the limit of "
+                             f"{MAX_RASTER_CELLS} (MAX_RASTER_CELLS): use a coarser resolution_m or a smaller reference")
+        idx = (cells - lo).astype(np.intp)
+        free = np.ones(shape.astype(np.intp), dtype=bool)
+        free[idx[:, 0], idx[:, 1]] = False
+        dist = ndimage.distance_transform_edt(free, sampling=res)
+        likelihood = np.exp(-0.5 * (dist / sigma) ** 2)
+        likelihood[dist > cutoff] = 0.0
+        raster = np.rint(likelihood * RASTER_MAX).astype(np.uint16)
+        return cls(res, sigma, len(pts), lo * res, raster)
+
+    def pyramid(self, depth: int, pad_lo: np.ndarray, pad_hi: np.ndarray) -> _Pyramid:
+        """Levels 0..``depth`` with at least ``pad_lo``/``pad_hi`` zero cells around the raster (cached)."""
+        if self._pyramid:
+            cached = self._pyramid[0]
+            if cached.depth >= depth and np.all(cached.pad_lo >= pad_lo) and np.all(cached.pad_hi >= pad_hi):
+                return cached
+            depth = max(depth, cached.depth)
+            pad_lo, pad_hi = np.maximum(pad_lo, cached.pad_lo), np.maximum(pad_hi, cached.pad_hi)
+        shape = np.array(self.raster.shape) + pad_lo + pad_hi
+        total = float(depth + 1) * float(shape[0]) * float(shape[1])
+        if total > MAX_RASTER_CELLS:
+            raise ValueError(f"the search would need {depth + 1} rasters of {shape[0]} x {shape[1]} cells ({total:.3g}), "
+                             f"above the limit of {MAX_RASTER_CELLS} (MAX_RASTER_CELLS): use a coarser resolution_m "
+                             "or a smaller search_range")
+        nx, ny = int(shape[0]), int(shape[1])
+        levels = np.zeros((depth + 1, nx, ny), dtype=np.uint16)
+        rx, ry = self.raster.shape
+        levels[0, pad_lo[0]:pad_lo[0] + rx, pad_lo[1]:pad_lo[1] + ry] = self.raster
+        for k in range(1, depth + 1):
+            size = 1 << k
+            # Window [i, i + size) in both axes: the maximum over the block above and to the right.
+            ndimage.maximum_filter(levels[0], size=size, origin=-(size // 2), mode="constant", cval=0,
+                                   output=levels[k])
+        built = _Pyramid(depth, np.asarray(pad_lo, np.intp), np.asarray(pad_hi, np.intp), (nx, ny), levels.reshape(-1))
+        self._pyramid[:] = [built]
+        return built
+
+
+@dataclass(frozen=True)
+class GridMatchResult:
+    """The outcome of one correlative scan match; MATLAB ``matchScansGrid`` returns pose, score and covariance.
+
+    Attributes:
+        pose: [x, y, theta] (m, m, rad) of the current scan's frame in the
+            reference frame (``p_ref = R(theta) p_cur + [x, y]``): the best
+            candidate of the discretized window (theta wrapped to [-pi, pi)).
+        score: mean over the current points of the likelihood raster at the
+            moved points, in [0, 1] (1: every point on a reference point's cell).
+        covariance: 3x3 covariance of [x, y, theta] (m^2, m^2, rad^2; m rad off
+            the diagonal), Olson's: the spread of the candidates within
+            ``COVARIANCE_HALF_WIDTH`` steps of the best, each weighted by its
+            likelihood (the product over points of the raster values, floored at
+            the kernel cutoff), plus the discretization's own variance
+            (step^2 / 12 in each coordinate). Infinite diagonal on failure.
+        ok: True when a pose was found; False with ``reason`` on failure.
+        reason: what was done, or why the match failed, in words.
+        n_points: finite current points used.
+        index: (theta, x, y) steps of ``pose`` from ``initial_pose`` (for a
+            full-turn window, theta steps from the initial heading modulo the turn);
+            None on failure.
+        n_candidates: candidate poses in the discretized window.
+        n_evaluated: nodes scored (all levels, the covariance neighbourhood excluded);
+            ``n_candidates`` for the exhaustive search.
+        resolution_m: translation step, metres.
+        angular_resolution_rad: rotation step, radians.
+    """
+
+    pose: np.ndarray
+    score: float
+    covariance: np.ndarray
+    ok: bool
+    reason: str
+    n_points: int = 0
+    index: tuple[int, int, int] | None = None
+    n_candidates: int = 0
+    n_evaluated: int = 0
+    resolution_m: float = 0.0
+    angular_resolution_rad: float = 0.0
+
+    @property
+    def converged(self) -> bool:
+        """Alias of ``ok``, as :class:`bagtools.ndt.NdtResult` names it."""
+        return self.ok
+
+
+def _positive(value: float, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return v
+
+
+def _failure(pose0: np.ndarray, reason: str, n: int, **extra) -> GridMatchResult:
+    return GridMatchResult(pose=pose0.copy(), score=0.0, covariance=np.diag([np.inf, np.inf, np.inf]), ok=False,
+                           reason=reason, n_points=n, **extra)
+
+
+@dataclass(frozen=True)
+class _Window:
+    """The discretized search window and the rotated, binned current points."""
+
+    steps: np.ndarray  # (3,) half-widths in steps: theta (or -1 for a full turn), x, y
+    n: tuple[int, int, int]  # candidates along theta, x, y
+    angles: np.ndarray  # (A,) candidate headings, rad
+    angular_step: float
+    base: np.ndarray  # (A, N) flat level-0 index of each point for the window's first x, y candidate
+    plane: int  # cells per level
+    stride: int  # flat index step of one x step (one y step is 1)
+    levels: np.ndarray
+    depth: int
+
+
+def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, search: np.ndarray,
+            angular_resolution: float | None) -> _Window:
+    res = ref.resolution_m
+    wx, wy = (np.floor(search[:2] / res + 1e-9)).astype(int).tolist()
+    if angular_resolution is None:
+        reach = max(float(np.sqrt((points**2).sum(axis=1)).max()), res)
+        # The farthest point moves by about one cell per step (chord = resolution).
+        angular_step = math.acos(max(1.0 - res * res / (2.0 * reach * reach), -1.0))
+    else:
+        angular_step = _positive(angular_resolution, "angular_resolution_rad")
+    wa = int(math.floor(search[2] / angular_step + 1e-9))
+    if (2 * wa + 1) * angular_step >= 2 * math.pi:  # the window covers the whole turn: no duplicate headings
+        na = int(math.ceil(2 * math.pi / angular_step - 1e-9))
+        angular_step = 2 * math.pi / na
+        offsets = (np.arange(na) - na // 2) * angular_step
+        wa = -1
+    else:
+        na = 2 * wa + 1
+        offsets = np.arange(-wa, wa + 1) * angular_step
+    nx, ny = 2 * wx + 1, 2 * wy + 1
+    if float(na) * len(points) > MAX_ROTATED_POINTS:
+        raise ValueError(f"the search would rotate {na} x {len(points)} points, above the limit of {MAX_ROTATED_POINTS} "
+                         "(MAX_ROTATED_POINTS): use a coarser angular resolution or a smaller rotation search_range")
+    depth = min(max(int(math.ceil(math.log2(max(nx, ny)))), 0), MAX_DEPTH)
+    # Zero padding that makes clipping the binned points exact (see below): 2^depth + 2w below, 2w + 1 above.
+    w = np.array([wx, wy])
+    pyr = ref.pyramid(depth, (1 << depth) + 2 * w, 2 * w + 1)
+    angles = pose0[2] + offsets
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    px, py = points[:, 0][None, :], points[:, 1][None, :]
+    origin = ref.origin - pyr.pad_lo * res
+    fx = np.floor((c * px - s * py + (pose0[0] - origin[0])) / res)
+    fy = np.floor((s * px + c * py + (pose0[1] - origin[1])) / res)
+    # A point whose cell is far outside the reference content scores 0 at every candidate and every level;
+    # moving it to the nearest such cell keeps that and keeps every lookup inside the padded raster.
+    content_lo = pyr.pad_lo
+    content_hi = pyr.pad_lo + np.array(ref.raster.shape) - 1
+    lo = content_lo - (1 << depth) - w
+    hi = content_hi + w + 1
+    ix = np.clip(fx, lo[0], hi[0]).astype(np.intp) - wx
+    iy = np.clip(fy, lo[1], hi[1]).astype(np.intp) - wy
+    base = ix * pyr.shape[1] + iy
+    wrapped = (angles + np.pi) % (2 * np.pi) - np.pi
+    return _Window(np.array([wa, wx, wy]), (na, nx, ny), wrapped, angular_step, base,
+                   pyr.shape[0] * pyr.shape[1], pyr.shape[1], pyr.levels, depth)
+
+
+def _scores(win: _Window, a: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Integer score sums (int64) of nodes: angle index ``a`` and flat ``offset`` (level and x, y corner)."""
+    n_points = win.base.shape[1]
+    step = max(1, _CHUNK_LOOKUPS // max(n_points, 1))
+    if len(a) <= step:
+        idx = win.base.take(a, axis=0)
+        idx += offset[:, None]
+        return win.levels.take(idx).sum(axis=1, dtype=np.int64)
+    return np.concatenate([_scores(win, a[i:i + step], offset[i:i + step]) for i in range(0, len(a), step)])
+
+
+def _exhaustive(win: _Window, threshold: int) -> tuple[int, int, int]:
+    """Best candidate (score sum, linear index a * nx * ny + ix * ny + iy, candidates scored) by scoring all."""
+    na, nx, ny = win.n
+    offs = (np.arange(nx)[:, None] * win.stride + np.arange(ny)[None, :]).reshape(-1)
+    n_points = win.base.shape[1]
+    per_angle = max(1, _CHUNK_LOOKUPS // max(n_points * len(offs), 1))
+    best, best_lin = threshold - 1, -1
+    if len(offs) * n_points > _CHUNK_LOOKUPS:  # one angle at a time, translations in chunks
+        for a in range(na):
+            sums = _scores(win, np.full(len(offs), a), offs)
+            k = int(np.argmax(sums))
+            if sums[k] > best:
+                best, best_lin = int(sums[k]), a * len(offs) + k
+        return best, best_lin, na * nx * ny
+    for a0 in range(0, na, per_angle):
+        idx = win.base[a0:a0 + per_angle, None, :] + offs[None, :, None]
+        sums = np.sum(win.levels.take(idx), axis=2, dtype=np.int64).reshape(-1)
+        k = int(np.argmax(sums))
+        if sums[k] > best:  # strictly: an equal score later in the order loses the tie
+            best, best_lin = int(sums[k]), a0 * len(offs) + k
+    return best, best_lin, na * nx * ny
+
+
+# Rows of the branch and bound's node table.
+_A, _IX, _IY, _LEVEL, _OFF = range(5)
+# Child corners of a node, in halves of its side: (x, y) = (0, 0), (0, 1), (1, 0), (1, 1).
+_CHILD_DX = np.array([0, 0, 1, 1])
+_CHILD_DY = np.array([0, 1, 0, 1])
+
+
+def _branch_and_bound(win: _Window, threshold: int, beam: int = 16, alpha: float = 0.35,
+                      top_level: int | None = None) -> tuple[int, int, int]:
+    """Best candidate (score sum, linear index, nodes scored) by best-first branch and bound over the levels.
+
+    A node is an angle and a block of 2^k x 2^k translations (level k), its
+    bound the level-k score at the block's corner. The open nodes are kept in
+    arrays and expanded in vectorized batches: first a beam dive (the ``beam``
+    best nodes of the finest open level, level after level) down to candidates,
+    which gives a good incumbent; then, repeatedly, every open node whose
+    bound lies in the top ``alpha`` of the gap between the incumbent and the
+    highest bound. Nodes whose bound is below the incumbent are dropped. The
+    result does not depend on these choices, only the work does.
+    """
+    na, nx, ny = win.n
+    plane, stride = win.plane, win.stride
+    level0 = win.depth if top_level is None else top_level
+    side = 1 << level0
+    cx, cy = np.arange(0, nx, side), np.arange(0, ny, side)
+    nodes = np.empty((5, na * len(cx) * len(cy)), dtype=np.int64)
+    nodes[_A] = np.repeat(np.arange(na), len(cx) * len(cy))
+    nodes[_IX] = np.tile(np.repeat(cx, len(cy)), na)
+    nodes[_IY] = np.tile(cy, na * len(cx))
+    nodes[_LEVEL] = level0
+    nodes[_OFF] = level0 * plane + nodes[_IX] * stride + nodes[_IY]
+    bound = _scores(win, nodes[_A], nodes[_OFF])
+    evaluated = bound.size
+    # The incumbent: the best candidate so far. Nodes bounded below its score cannot hold a better one;
+    # nodes bounded at its score may hold an equal one that wins the tie (lower linear index), so they stay.
+    best, best_lin = threshold, np.iinfo(np.int64).max
+    diving = True
+    min_batch = 4 * beam
+    while True:
+        if level0 == 0 or (nodes[_LEVEL] == 0).any():  # candidates: exact scores
+            leaf = nodes[_LEVEL] == 0
+            s = bound[leaf]
+            top = int(s.max())
+            if top >= best:
+                cand = nodes[:, leaf][:, s == top]
+                lin = int(((cand[_A] * nx + cand[_IX]) * ny + cand[_IY]).min())
+                if top > best or lin < best_lin:
+                    best, best_lin = top, lin
+            keep = ~leaf
+            keep &= bound >= best
+            diving = False
+            level0 = -1
+        else:
+            keep = bound >= best
+        nodes, bound = nodes[:, keep], bound[keep]
+        if not bound.size:
+            break
+        if diving:
+            finest = nodes[_LEVEL] == nodes[_LEVEL].min()
+            pick = np.flatnonzero(finest)
+            if pick.size > beam:
+                pick = pick[np.argpartition(bound[pick], pick.size - beam)[pick.size - beam:]]
+        else:
+            high = int(bound.max())
+            pick = np.flatnonzero(bound >= high - alpha * (high - best))
+            if pick.size < min_batch < bound.size:
+                pick = np.argpartition(bound, bound.size - min_batch)[bound.size - min_batch:]
+        parents = nodes[:, pick]
+        rest = np.ones(bound.size, dtype=bool)
+        rest[pick] = False
+        half = np.left_shift(1, parents[_LEVEL] - 1)
+        children = np.repeat(parents, 4, axis=1)
+        children[_LEVEL] -= 1
+        dx = (_CHILD_DX * half[:, None]).reshape(-1)
+        dy = (_CHILD_DY * half[:, None]).reshape(-1)
+        children[_IX] += dx
+        children[_IY] += dy
+        children[_OFF] += dx * stride + dy - plane
+        children = children[:, (children[_IX] < nx) & (children[_IY] < ny)]
+        child_bound = _scores(win, children[_A], children[_OFF])
+        evaluated += child_bound.size
+        nodes = np.concatenate((nodes[:, rest], children), axis=1)
+        bound = np.concatenate((bound[rest], child_bound))
+    return best, int(best_lin), evaluated
+
+
+def _covariance(win: _Window, a0: int, ix0: int, iy0: int, res: float) -> np.ndarray:
+    """Olson's covariance from the likelihood-weighted candidates around the best (see :class:`GridMatchResult`)."""
+    na, nx, ny = win.n
+    h = COVARIANCE_HALF_WIDTH
+    da = np.arange(-h, h + 1)
+    if win.steps[0] < 0:  # full turn: neighbours wrap around
+        da = da[: min(len(da), na)]
+        aa = (a0 + da) % na
+    else:
+        aa = a0 + da
+        da, aa = da[(aa >= 0) & (aa < na)], aa[(aa >= 0) & (aa < na)]
+    dx = np.arange(max(-h, -ix0), min(h, nx - 1 - ix0) + 1)
+    dy = np.arange(max(-h, -iy0), min(h, ny - 1 - iy0) + 1)
+    ga, gx, gy = (g.reshape(-1) for g in np.meshgrid(np.arange(len(da)), dx, dy, indexing="ij"))
+    idx = win.base[aa[ga]] + ((ix0 + gx) * win.stride + (iy0 + gy))[:, None]
+    log_l = _LOG_LIKELIHOOD.take(win.levels.take(idx)).sum(axis=1)
+    w = np.exp(log_l - log_l.max())
+    d = np.column_stack((gx * res, gy * res, da[ga] * win.angular_step))
+    mean = w @ d / w.sum()
+    centred = d - mean
+    cov = (centred * w[:, None]).T @ centred / w.sum()
+    return cov + np.diag([res * res / 12.0, res * res / 12.0, win.angular_step**2 / 12.0])
+
+
+def match_scans_grid(
+    current_points: np.ndarray,
+    reference: np.ndarray | CorrelativeReference,
+    *,
+    initial_pose: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+    search_range: tuple[float, float, float] | np.ndarray = (4.0, 4.0, math.pi / 4),
+    resolution_m: float | None = None,
+    angular_resolution_rad: float | None = None,
+    max_range_m: float | None = None,
+    sigma_m: float | None = None,
+    min_score: float = 0.0,
+    method: str = "branch_and_bound",
+) -> GridMatchResult:
+    """Best pose of the ``current`` scan in the ``reference`` frame over a search window (MATLAB ``matchScansGrid``).
+
+    Args:
+        current_points: (N, 2) current scan x, y in its own frame, metres; non-finite rows are dropped.
+        reference: (M, 2) reference points in the reference frame, metres (one
+            scan, or several scans moved into that frame), or a
+            :class:`CorrelativeReference` built from them (reuse it to match many scans).
+        initial_pose: centre of the window, [x, y, theta] (m, m, rad), same
+            convention as the result: ``p_ref = R(theta) p_cur + [x, y]``.
+        search_range: half-widths of the window (x_m, y_m, theta_rad): poses
+            initial_pose +- search_range (MATLAB's defaults 4 m, 4 m, pi/4); a
+            theta range whose window spans a full turn searches every heading once.
+        resolution_m: translation step and raster cell, metres (default 0.05,
+            MATLAB's; must equal a prebuilt reference's own, which it defaults to).
+        angular_resolution_rad: rotation step, radians; default: the angle that
+            moves the farthest current point by one cell.
+        max_range_m: current points farther than this from the sensor are dropped (default: keep all).
+        sigma_m: likelihood kernel spread (default: the resolution); ignored for a prebuilt reference.
+        min_score: the match fails unless the best score (in [0, 1]) reaches it;
+            a higher value also prunes more. With 0, some point must land near the reference.
+        method: "branch_and_bound" or "exhaustive" (every candidate scored, the
+            same result, much slower; the reference for tests and benchmarks).
+
+    Returns:
+        A :class:`GridMatchResult`. Fewer than 5 finite points in either scan, or
+        no candidate reaching ``min_score``, gives ``ok=False`` with the reason,
+        the initial pose and an infinite covariance, never an exception.
+
+    Raises:
+        ValueError: on bad shapes or parameters, or a window and resolution that
+            would need more than ``MAX_RASTER_CELLS`` raster cells or
+            ``MAX_ROTATED_POINTS`` rotated points (checked before allocating).
+    """
+    pose0 = np.asarray(initial_pose, dtype=np.float64).reshape(-1)
+    if pose0.shape != (3,) or not np.isfinite(pose0).all():
+        raise ValueError(f"initial_pose must be three finite numbers [x, y, theta], got {initial_pose!r}")
+    search = np.asarray(search_range, dtype=np.float64).reshape(-1)
+    if search.shape != (3,) or not np.isfinite(search).all() or (search < 0).any():
+        raise ValueError(f"search_range must be three non-negative numbers (x_m, y_m, theta_rad), got {search_range!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if not (math.isfinite(min_score) and 0.0 <= min_score <= 1.0):
+        raise ValueError(f"min_score must be in [0, 1], got {min_score!r}")
+    if isinstance(reference, CorrelativeReference):
+        ref = reference
+        if resolution_m is not None and _positive(resolution_m, "resolution_m") != ref.resolution_m:
+            raise ValueError(f"resolution_m={resolution_m} differs from the prebuilt reference's {ref.resolution_m}")
+    else:
+        ref = CorrelativeReference.from_points(reference, 0.05 if resolution_m is None else resolution_m, sigma_m)
+    cur = finite_points(current_points, "current points")
+    if max_range_m is not None:
+        cur = cur[(cur**2).sum(axis=1) <= _positive(max_range_m, "max_range_m") ** 2]
+    n = len(cur)
+    if n < MIN_SCAN_POINTS:
+        return _failure(pose0, f"too few valid points in the current scan ({n} < {MIN_SCAN_POINTS})", n)
+    if ref.n_points < MIN_SCAN_POINTS:
+        return _failure(pose0, f"too few valid points in the reference scan ({ref.n_points} < {MIN_SCAN_POINTS})", n)
+    win = _window(ref, cur, pose0, search, angular_resolution_rad)
+    na, nx, ny = win.n
+    stats = dict(n_points=n, n_candidates=na * nx * ny, resolution_m=ref.resolution_m,
+                 angular_resolution_rad=win.angular_step)
+    threshold = max(1, int(math.ceil(min_score * n * RASTER_MAX - 1e-9)))
+    search_fn = _branch_and_bound if method == "branch_and_bound" else _exhaustive
+    best, lin, evaluated = search_fn(win, threshold)
+    if best < threshold:
+        why = ("no current point lands near the reference anywhere in the search window" if threshold == 1
+               else f"no pose in the search window reaches min_score={min_score}")
+        return _failure(pose0, why, n_evaluated=evaluated, **stats)
+    a, rest = divmod(lin, nx * ny)
+    ix, iy = divmod(rest, ny)
+    wa, wx, wy = win.steps.tolist()
+    da = a - wa if wa >= 0 else a - na // 2
+    pose = np.array([pose0[0] + (ix - wx) * ref.resolution_m, pose0[1] + (iy - wy) * ref.resolution_m, win.angles[a]])
+    return GridMatchResult(pose=pose, score=best / (n * RASTER_MAX),
+                           covariance=_covariance(win, a, ix, iy, ref.resolution_m), ok=True,
+                           reason=f"best of {na * nx * ny} candidates ({method})", index=(da, ix - wx, iy - wy),
+                           n_evaluated=evaluated, **stats)
+
+
+def match_scans_grid_ranges(
+    current_ranges: np.ndarray,
+    current_angles: np.ndarray,
+    reference_ranges: np.ndarray,
+    reference_angles: np.ndarray,
+    *,
+    range_limits: tuple[float, float] | None = None,
+    **kwargs,
+) -> GridMatchResult:
+    """:func:`match_scans_grid` on two scans given as ranges (m) and beam angles (rad).
+
+    Beams with a non-finite or non-positive range (or outside ``range_limits``,
+    metres, when given) are dropped; ``kwargs`` go to :func:`match_scans_grid`.
+    """
+    return match_scans_grid(ranges_to_points(current_ranges, current_angles, range_limits),
+                            ranges_to_points(reference_ranges, reference_angles, range_limits), **kwargs)
