@@ -50,14 +50,14 @@ KERNEL_CUTOFF_SIGMAS = 3.0
 MAX_RASTER_CELLS = 64_000_000
 #: Memory guard: at most this many rotated points (candidate angles x current points, 8 bytes each).
 MAX_ROTATED_POINTS = 16_000_000
-#: The coarsest precomputed level covers 2^this cells square (Cartographer uses 7 levels).
+#: The coarsest level has blocks of at most 2^this cells square (Cartographer uses 7 levels).
 MAX_DEPTH = 7
 #: Half-width, in window steps, of the neighbourhood of the best candidate that the covariance is computed from.
-COVARIANCE_HALF_WIDTH = 3
+COVARIANCE_HALF_WIDTH = 2
 METHODS = ("branch_and_bound", "exhaustive")
 # Per-point log-likelihood of a raster value (floored at the kernel cutoff), for the covariance.
 _LOG_LIKELIHOOD = np.maximum(np.log(np.maximum(np.arange(RASTER_MAX + 1), 0.5) / RASTER_MAX),
-                             -0.5 * KERNEL_CUTOFF_SIGMAS**2)
+                             -0.5 * KERNEL_CUTOFF_SIGMAS**2).astype(np.float32)
 # Best-first batches: expand at least this many open nodes per step, and at most this fraction of them.
 _MIN_BATCH = 32
 _BATCH_FRACTION = 0.25
@@ -262,25 +262,30 @@ def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, se
     if float(na) * len(points) > MAX_ROTATED_POINTS:
         raise ValueError(f"the search would rotate {na} x {len(points)} points, above the limit of {MAX_ROTATED_POINTS} "
                          "(MAX_ROTATED_POINTS): use a coarser angular resolution or a smaller rotation search_range")
-    depth = min(max(int(math.ceil(math.log2(max(nx, ny)))), 0), MAX_DEPTH)
+    # The coarsest level: blocks of 2^depth cells that cover the window in 2 x 2 (or fewer).
+    depth = min(max(int(math.ceil(math.log2(max(nx, ny)))) - 1, 0), MAX_DEPTH)
     # Zero padding that makes clipping the binned points exact (see below): 2^depth + 2w below, 2w + 1 above.
     w = np.array([wx, wy])
     pyr = ref.pyramid(depth, (1 << depth) + 2 * w, 2 * w + 1)
     angles = pose0[2] + offsets
-    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    px, py = points[:, 0][None, :], points[:, 1][None, :]
-    origin = ref.origin - pyr.pad_lo * res
-    fx = np.floor((c * px - s * py + (pose0[0] - origin[0])) / res)
-    fy = np.floor((s * px + c * py + (pose0[1] - origin[1])) / res)
+    c, s = np.cos(angles), np.sin(angles)
+    # Rows 0..A-1: x, rows A..2A-1: y of the rotated points, in cells of the padded raster.
+    rot = np.concatenate((np.column_stack((c, -s)), np.column_stack((s, c)))) * (1.0 / res)
+    cells = rot @ points.T
+    shift = (pose0[:2] - ref.origin) / res + pyr.pad_lo
+    cells[:na] += shift[0]
+    cells[na:] += shift[1]
+    np.floor(cells, out=cells)
     # A point whose cell is far outside the reference content scores 0 at every candidate and every level;
     # moving it to the nearest such cell keeps that and keeps every lookup inside the padded raster.
-    content_lo = pyr.pad_lo
-    content_hi = pyr.pad_lo + np.array(ref.raster.shape) - 1
-    lo = content_lo - (1 << depth) - w
-    hi = content_hi + w + 1
-    ix = np.clip(fx, lo[0], hi[0]).astype(np.intp) - wx
-    iy = np.clip(fy, lo[1], hi[1]).astype(np.intp) - wy
-    base = ix * pyr.shape[1] + iy
+    lo = pyr.pad_lo - (1 << depth) - w
+    hi = pyr.pad_lo + np.array(ref.raster.shape) - 1 + w + 1
+    np.clip(cells[:na], lo[0], hi[0], out=cells[:na])
+    np.clip(cells[na:], lo[1], hi[1], out=cells[na:])
+    icells = cells.astype(np.intp)
+    base = icells[:na] * pyr.shape[1]
+    base += icells[na:]
+    base -= wx * pyr.shape[1] + wy  # the window's first candidate: initial pose - (wx, wy) cells
     wrapped = (angles + np.pi) % (2 * np.pi) - np.pi
     return _Window(np.array([wa, wx, wy]), (na, nx, ny), wrapped, angular_step, base,
                    pyr.shape[0] * pyr.shape[1], pyr.shape[1], pyr.levels, depth)
@@ -320,89 +325,109 @@ def _exhaustive(win: _Window, threshold: int) -> tuple[int, int, int]:
     return best, best_lin, na * nx * ny
 
 
-# Rows of the branch and bound's node table.
-_A, _IX, _IY, _LEVEL, _OFF = range(5)
 # Child corners of a node, in halves of its side: (x, y) = (0, 0), (0, 1), (1, 0), (1, 1).
 _CHILD_DX = np.array([0, 0, 1, 1])
 _CHILD_DY = np.array([0, 1, 0, 1])
 
 
-def _branch_and_bound(win: _Window, threshold: int, beam: int = 16, alpha: float = 0.35,
-                      top_level: int | None = None) -> tuple[int, int, int]:
-    """Best candidate (score sum, linear index, nodes scored) by best-first branch and bound over the levels.
+def _children(win: _Window, parents: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """The level-(``level`` - 1) children of level-``level`` nodes (3, M) (rows: angle, x, y corner) and their scores."""
+    half = 1 << (level - 1)
+    nodes = np.repeat(parents, 4, axis=1)
+    nodes[1] += np.tile(_CHILD_DX * half, parents.shape[1])
+    nodes[2] += np.tile(_CHILD_DY * half, parents.shape[1])
+    if nodes.shape[1] and (nodes[1].max() >= win.n[1] or nodes[2].max() >= win.n[2]):
+        nodes = nodes[:, (nodes[1] < win.n[1]) & (nodes[2] < win.n[2])]
+    return nodes, _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + (level - 1) * win.plane)
+
+
+def _best_candidate(win: _Window, nodes: np.ndarray, scores: np.ndarray, best: int, best_lin: int) -> tuple[int, int]:
+    """The incumbent after scoring candidates ``nodes`` (3, M): the higher score, then the lower linear index."""
+    if not scores.size:
+        return best, best_lin
+    top = int(scores.max())
+    if top < best:
+        return best, best_lin
+    cand = nodes[:, scores == top]
+    lin = int(((cand[0] * win.n[1] + cand[1]) * win.n[2] + cand[2]).min())
+    if top > best or lin < best_lin:
+        return top, lin
+    return best, best_lin
+
+
+def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float = 0.15,
+                      min_batch: int = 64) -> tuple[int, int, int]:
+    """Best candidate (score sum, linear index, nodes scored) by branch and bound over the levels.
 
     A node is an angle and a block of 2^k x 2^k translations (level k), its
-    bound the level-k score at the block's corner. The open nodes are kept in
-    arrays and expanded in vectorized batches: first a beam dive (the ``beam``
-    best nodes of the finest open level, level after level) down to candidates,
-    which gives a good incumbent; then, repeatedly, every open node whose
+    bound the level-k score at the block's corner; the roots are the blocks of
+    the coarsest level. First a beam dive (the ``beam`` best nodes of each
+    level, down to candidates) gives a good incumbent. Then sweeps from the
+    coarsest level to the finest expand, at each level, the open nodes whose
     bound lies in the top ``alpha`` of the gap between the incumbent and the
-    highest bound. Nodes whose bound is below the incumbent are dropped. The
-    result does not depend on these choices, only the work does.
+    level's highest bound (at least ``min_batch`` of them; best first, but in
+    vectorized batches), and drop every node bounded below the incumbent, until
+    no node is open. A node bounded exactly at the incumbent's score stays: it
+    may hold a candidate that wins the tie. The result does not depend on
+    ``beam``, ``alpha`` or ``min_batch``, only the work does.
     """
     na, nx, ny = win.n
-    plane, stride = win.plane, win.stride
-    level0 = win.depth if top_level is None else top_level
-    side = 1 << level0
+    top = win.depth
+    side = 1 << top
     cx, cy = np.arange(0, nx, side), np.arange(0, ny, side)
-    nodes = np.empty((5, na * len(cx) * len(cy)), dtype=np.int64)
-    nodes[_A] = np.repeat(np.arange(na), len(cx) * len(cy))
-    nodes[_IX] = np.tile(np.repeat(cx, len(cy)), na)
-    nodes[_IY] = np.tile(cy, na * len(cx))
-    nodes[_LEVEL] = level0
-    nodes[_OFF] = level0 * plane + nodes[_IX] * stride + nodes[_IY]
-    bound = _scores(win, nodes[_A], nodes[_OFF])
+    nodes = np.empty((3, na * len(cx) * len(cy)), dtype=np.int64)
+    nodes[0] = np.repeat(np.arange(na), len(cx) * len(cy))
+    nodes[1] = np.tile(np.repeat(cx, len(cy)), na)
+    nodes[2] = np.tile(cy, na * len(cx))
+    bound = _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + top * win.plane)
     evaluated = bound.size
-    # The incumbent: the best candidate so far. Nodes bounded below its score cannot hold a better one;
-    # nodes bounded at its score may hold an equal one that wins the tie (lower linear index), so they stay.
     best, best_lin = threshold, np.iinfo(np.int64).max
-    diving = True
-    min_batch = 4 * beam
-    while True:
-        if level0 == 0 or (nodes[_LEVEL] == 0).any():  # candidates: exact scores
-            leaf = nodes[_LEVEL] == 0
-            s = bound[leaf]
-            top = int(s.max())
-            if top >= best:
-                cand = nodes[:, leaf][:, s == top]
-                lin = int(((cand[_A] * nx + cand[_IX]) * ny + cand[_IY]).min())
-                if top > best or lin < best_lin:
-                    best, best_lin = top, lin
-            keep = ~leaf
-            keep &= bound >= best
-            diving = False
-            level0 = -1
-        else:
+    if top == 0:  # a window of one cell in x and y: the roots are the candidates
+        best, best_lin = _best_candidate(win, nodes, bound, best, best_lin)
+        return best, best_lin, evaluated
+    # Open nodes of each level: lists of (nodes (3, M), bounds (M,)), concatenated when the level is swept.
+    open_nodes: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(top + 1)]
+    for level in range(top, 0, -1):  # the dive
+        if bound.size > beam:
+            order = np.argpartition(bound, bound.size - beam)
+            rest, pick = order[:-beam], order[-beam:]
+            open_nodes[level].append((nodes[:, rest], bound[rest]))
+            nodes, bound = nodes[:, pick], bound[pick]
+        nodes, bound = _children(win, nodes, level)
+        evaluated += bound.size
+    best, best_lin = _best_candidate(win, nodes, bound, best, best_lin)
+    while any(open_nodes):
+        for level in range(top, 0, -1):
+            pending = open_nodes[level]
+            if not pending:
+                continue
+            if len(pending) == 1:
+                nodes, bound = pending[0]
+            else:
+                nodes = np.concatenate([p[0] for p in pending], axis=1)
+                bound = np.concatenate([p[1] for p in pending])
+            pending.clear()
             keep = bound >= best
-        nodes, bound = nodes[:, keep], bound[keep]
-        if not bound.size:
-            break
-        if diving:
-            finest = nodes[_LEVEL] == nodes[_LEVEL].min()
-            pick = np.flatnonzero(finest)
-            if pick.size > beam:
-                pick = pick[np.argpartition(bound[pick], pick.size - beam)[pick.size - beam:]]
-        else:
-            high = int(bound.max())
-            pick = np.flatnonzero(bound >= high - alpha * (high - best))
-            if pick.size < min_batch < bound.size:
-                pick = np.argpartition(bound, bound.size - min_batch)[bound.size - min_batch:]
-        parents = nodes[:, pick]
-        rest = np.ones(bound.size, dtype=bool)
-        rest[pick] = False
-        half = np.left_shift(1, parents[_LEVEL] - 1)
-        children = np.repeat(parents, 4, axis=1)
-        children[_LEVEL] -= 1
-        dx = (_CHILD_DX * half[:, None]).reshape(-1)
-        dy = (_CHILD_DY * half[:, None]).reshape(-1)
-        children[_IX] += dx
-        children[_IY] += dy
-        children[_OFF] += dx * stride + dy - plane
-        children = children[:, (children[_IX] < nx) & (children[_IY] < ny)]
-        child_bound = _scores(win, children[_A], children[_OFF])
-        evaluated += child_bound.size
-        nodes = np.concatenate((nodes[:, rest], children), axis=1)
-        bound = np.concatenate((bound[rest], child_bound))
+            if not keep.all():
+                nodes, bound = nodes[:, keep], bound[keep]
+            if bound.size > min_batch:
+                high = int(bound.max())
+                pick = bound >= high - alpha * (high - best)
+                if np.count_nonzero(pick) < min_batch:
+                    order = np.argpartition(bound, bound.size - min_batch)
+                    pick = np.zeros(bound.size, dtype=bool)
+                    pick[order[-min_batch:]] = True
+                pick_not = ~pick
+                pending.append((nodes[:, pick_not], bound[pick_not]))
+                nodes = nodes[:, pick]
+            if not nodes.shape[1]:
+                continue
+            children, child_bound = _children(win, nodes, level)
+            evaluated += child_bound.size
+            if level == 1:
+                best, best_lin = _best_candidate(win, children, child_bound, best, best_lin)
+            else:
+                open_nodes[level - 1].append((children, child_bound))
     return best, int(best_lin), evaluated
 
 
@@ -415,18 +440,20 @@ def _covariance(win: _Window, a0: int, ix0: int, iy0: int, res: float) -> np.nda
         da = da[: min(len(da), na)]
         aa = (a0 + da) % na
     else:
+        inside = (a0 + da >= 0) & (a0 + da < na)
+        da = da[inside]
         aa = a0 + da
-        da, aa = da[(aa >= 0) & (aa < na)], aa[(aa >= 0) & (aa < na)]
     dx = np.arange(max(-h, -ix0), min(h, nx - 1 - ix0) + 1)
     dy = np.arange(max(-h, -iy0), min(h, ny - 1 - iy0) + 1)
-    ga, gx, gy = (g.reshape(-1) for g in np.meshgrid(np.arange(len(da)), dx, dy, indexing="ij"))
-    idx = win.base[aa[ga]] + ((ix0 + gx) * win.stride + (iy0 + gy))[:, None]
-    log_l = _LOG_LIKELIHOOD.take(win.levels.take(idx)).sum(axis=1)
+    offsets = ((ix0 + dx)[:, None] * win.stride + (iy0 + dy)[None, :]).reshape(-1)
+    idx = win.base.take(aa, axis=0)[:, None, :] + offsets[None, :, None]
+    log_l = _LOG_LIKELIHOOD.take(win.levels.take(idx)).sum(axis=2).reshape(-1)  # (angle, x, y) flattened
     w = np.exp(log_l - log_l.max())
-    d = np.column_stack((gx * res, gy * res, da[ga] * win.angular_step))
-    mean = w @ d / w.sum()
-    centred = d - mean
-    cov = (centred * w[:, None]).T @ centred / w.sum()
+    w /= w.sum()
+    ga, gx, gy = np.meshgrid(da * win.angular_step, dx * res, dy * res, indexing="ij")
+    d = np.stack((gx.reshape(-1), gy.reshape(-1), ga.reshape(-1)))  # (3, M): x, y, theta offsets from the best
+    centred = d - (d @ w)[:, None]
+    cov = (centred * w) @ centred.T
     return cov + np.diag([res * res / 12.0, res * res / 12.0, win.angular_step**2 / 12.0])
 
 
