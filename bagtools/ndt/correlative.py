@@ -22,9 +22,9 @@ above and to the right of it, so scoring a node (an angle and a 2^k x 2^k block
 of translations) at level k bounds the score of every candidate in it from above.
 Nodes are expanded best-first (highest bound first), in vectorized batches,
 until no open node's bound can beat the best candidate found; the result is the
-exact best candidate of the window (ties go to the first candidate in the order
-theta, x, y, lowest step first), the same as :func:`match_scans_grid` with
-``method="exhaustive"``.
+exact best candidate of the window (of equal scores, the one fewest steps from
+the initial pose, then the first in theta, x, y order), the same as
+:func:`match_scans_grid` with ``method="exhaustive"``.
 
 Pose convention, as :func:`bagtools.ndt.match_scans`: the pose [x, y, theta]
 (m, m, rad) is the pose of the current scan's frame in the reference frame,
@@ -244,24 +244,24 @@ def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, se
     res = ref.resolution_m
     wx, wy = (np.floor(search[:2] / res + 1e-9)).astype(int).tolist()
     if angular_resolution is None:
-        reach = max(float(np.sqrt((points**2).sum(axis=1)).max()), res)
+        reach = max(math.sqrt(float(np.einsum("ij,ij->i", points, points).max())), res)
         # The farthest point moves by about one cell per step (chord = resolution).
         angular_step = math.acos(max(1.0 - res * res / (2.0 * reach * reach), -1.0))
     else:
         angular_step = _positive(angular_resolution, "angular_resolution_rad")
     wa = int(math.floor(search[2] / angular_step + 1e-9))
-    if (2 * wa + 1) * angular_step >= 2 * math.pi:  # the window covers the whole turn: no duplicate headings
-        na = int(math.ceil(2 * math.pi / angular_step - 1e-9))
+    full_turn = (2 * wa + 1) * angular_step >= 2 * math.pi  # then every heading once, no duplicates
+    na = int(math.ceil(2 * math.pi / angular_step - 1e-9)) if full_turn else 2 * wa + 1
+    if float(na) * len(points) > MAX_ROTATED_POINTS:
+        raise ValueError(f"the search would rotate {na} x {len(points)} points, above the limit of {MAX_ROTATED_POINTS} "
+                         "(MAX_ROTATED_POINTS): use a coarser angular resolution or a smaller rotation search_range")
+    if full_turn:
         angular_step = 2 * math.pi / na
         offsets = (np.arange(na) - na // 2) * angular_step
         wa = -1
     else:
-        na = 2 * wa + 1
         offsets = np.arange(-wa, wa + 1) * angular_step
     nx, ny = 2 * wx + 1, 2 * wy + 1
-    if float(na) * len(points) > MAX_ROTATED_POINTS:
-        raise ValueError(f"the search would rotate {na} x {len(points)} points, above the limit of {MAX_ROTATED_POINTS} "
-                         "(MAX_ROTATED_POINTS): use a coarser angular resolution or a smaller rotation search_range")
     # The coarsest level: blocks of 2^depth cells that cover the window in 2 x 2 (or fewer).
     depth = min(max(int(math.ceil(math.log2(max(nx, ny)))) - 1, 0), MAX_DEPTH)
     # Zero padding that makes clipping the binned points exact (see below): 2^depth + 2w below, 2w + 1 above.
@@ -272,16 +272,16 @@ def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, se
     # Rows 0..A-1: x, rows A..2A-1: y of the rotated points, in cells of the padded raster.
     rot = np.concatenate((np.column_stack((c, -s)), np.column_stack((s, c)))) * (1.0 / res)
     cells = rot @ points.T
-    shift = (pose0[:2] - ref.origin) / res + pyr.pad_lo
-    cells[:na] += shift[0]
-    cells[na:] += shift[1]
-    np.floor(cells, out=cells)
     # A point whose cell is far outside the reference content scores 0 at every candidate and every level;
     # moving it to the nearest such cell keeps that and keeps every lookup inside the padded raster.
-    lo = pyr.pad_lo - (1 << depth) - w
-    hi = pyr.pad_lo + np.array(ref.raster.shape) - 1 + w + 1
-    np.clip(cells[:na], lo[0], hi[0], out=cells[:na])
-    np.clip(cells[na:], lo[1], hi[1], out=cells[na:])
+    # Clipped (to lo + 0.5 and hi + 0.5, safe from rounding) the cells are positive: truncation is the floor.
+    shift = (pose0[:2] - ref.origin) / res + pyr.pad_lo
+    lo = (pyr.pad_lo - (1 << depth) - w + 0.5 - shift).tolist()
+    hi = (pyr.pad_lo + np.array(ref.raster.shape) + w + 0.5 - shift).tolist()
+    for rows, axis in ((cells[:na], 0), (cells[na:], 1)):
+        np.maximum(rows, lo[axis], out=rows)
+        np.minimum(rows, hi[axis], out=rows)
+        rows += shift[axis]
     icells = cells.astype(np.intp)
     base = icells[:na] * pyr.shape[1]
     base += icells[na:]
@@ -302,27 +302,43 @@ def _scores(win: _Window, a: np.ndarray, offset: np.ndarray) -> np.ndarray:
     return np.concatenate([_scores(win, a[i:i + step], offset[i:i + step]) for i in range(0, len(a), step)])
 
 
+def _preferred(win: _Window, lin: np.ndarray) -> tuple[int, int]:
+    """The tie-break key (-distance^2, -lin) of the preferred one of equal-score candidates (linear indices ``lin``).
+
+    Ties go to the candidate fewest steps from the initial pose (squared steps in
+    theta, x and y), then to the lowest linear index (theta, x, y order).
+    """
+    na, nx, ny = win.n
+    a, rest = np.divmod(lin, nx * ny)
+    ix, iy = np.divmod(rest, ny)
+    wa, wx, wy = win.steps.tolist()
+    d2 = (a - (wa if wa >= 0 else na // 2)) ** 2 + (ix - wx) ** 2 + (iy - wy) ** 2
+    i = np.lexsort((lin, d2))[0]
+    return -int(d2[i]), -int(lin[i])
+
+
 def _exhaustive(win: _Window, threshold: int) -> tuple[int, int, int]:
     """Best candidate (score sum, linear index a * nx * ny + ix * ny + iy, candidates scored) by scoring all."""
     na, nx, ny = win.n
     offs = (np.arange(nx)[:, None] * win.stride + np.arange(ny)[None, :]).reshape(-1)
     n_points = win.base.shape[1]
-    per_angle = max(1, _CHUNK_LOOKUPS // max(n_points * len(offs), 1))
-    best, best_lin = threshold - 1, -1
+    best: tuple[int, int, int] | None = None  # (score, -distance^2, -lin): the larger the better
     if len(offs) * n_points > _CHUNK_LOOKUPS:  # one angle at a time, translations in chunks
-        for a in range(na):
-            sums = _scores(win, np.full(len(offs), a), offs)
-            k = int(np.argmax(sums))
-            if sums[k] > best:
-                best, best_lin = int(sums[k]), a * len(offs) + k
-        return best, best_lin, na * nx * ny
-    for a0 in range(0, na, per_angle):
-        idx = win.base[a0:a0 + per_angle, None, :] + offs[None, :, None]
-        sums = np.sum(win.levels.take(idx), axis=2, dtype=np.int64).reshape(-1)
-        k = int(np.argmax(sums))
-        if sums[k] > best:  # strictly: an equal score later in the order loses the tie
-            best, best_lin = int(sums[k]), a0 * len(offs) + k
-    return best, best_lin, na * nx * ny
+        chunks = ((a, _scores(win, np.full(len(offs), a), offs)) for a in range(na))
+    else:  # several angles at a time
+        per_angle = max(1, _CHUNK_LOOKUPS // (n_points * len(offs)))
+        chunks = ((a0, np.sum(win.levels.take(win.base[a0:a0 + per_angle, None, :] + offs[None, :, None]), axis=2,
+                              dtype=np.int64).reshape(-1)) for a0 in range(0, na, per_angle))
+    for a0, sums in chunks:
+        top = int(sums.max())
+        if top < threshold or (best is not None and top < best[0]):
+            continue
+        cand = (top, *_preferred(win, np.flatnonzero(sums == top) + a0 * len(offs)))
+        if best is None or cand > best:
+            best = cand
+    if best is None:
+        return threshold - 1, -1, na * nx * ny
+    return best[0], -best[2], na * nx * ny
 
 
 # Child corners of a node, in halves of its side: (x, y) = (0, 0), (0, 1), (1, 0), (1, 1).
@@ -341,18 +357,17 @@ def _children(win: _Window, parents: np.ndarray, level: int) -> tuple[np.ndarray
     return nodes, _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + (level - 1) * win.plane)
 
 
-def _best_candidate(win: _Window, nodes: np.ndarray, scores: np.ndarray, best: int, best_lin: int) -> tuple[int, int]:
-    """The incumbent after scoring candidates ``nodes`` (3, M): the higher score, then the lower linear index."""
+def _update_best(win: _Window, best: tuple[int, int, int] | None, nodes: np.ndarray,
+                 scores: np.ndarray) -> tuple[int, int, int] | None:
+    """The incumbent (score, -distance^2, -lin) after scoring candidates ``nodes`` (3, M) with ``scores``."""
     if not scores.size:
-        return best, best_lin
+        return best
     top = int(scores.max())
-    if top < best:
-        return best, best_lin
+    if best is not None and top < best[0]:
+        return best
     cand = nodes[:, scores == top]
-    lin = int(((cand[0] * win.n[1] + cand[1]) * win.n[2] + cand[2]).min())
-    if top > best or lin < best_lin:
-        return top, lin
-    return best, best_lin
+    key = (top, *_preferred(win, (cand[0] * win.n[1] + cand[1]) * win.n[2] + cand[2]))
+    return key if best is None or key > best else best
 
 
 def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float = 0.15,
@@ -381,10 +396,10 @@ def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float 
     nodes[2] = np.tile(cy, na * len(cx))
     bound = _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + top * win.plane)
     evaluated = bound.size
-    best, best_lin = threshold, np.iinfo(np.int64).max
+    incumbent: tuple[int, int, int] | None = None  # (score, -distance^2, -lin) of the best candidate so far
     if top == 0:  # a window of one cell in x and y: the roots are the candidates
-        best, best_lin = _best_candidate(win, nodes, bound, best, best_lin)
-        return best, best_lin, evaluated
+        incumbent = _update_best(win, incumbent, nodes, bound)
+        nodes, bound = nodes[:, :0], bound[:0]
     # Open nodes of each level: lists of (nodes (3, M), bounds (M,)), concatenated when the level is swept.
     open_nodes: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(top + 1)]
     for level in range(top, 0, -1):  # the dive
@@ -395,8 +410,9 @@ def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float 
             nodes, bound = nodes[:, pick], bound[pick]
         nodes, bound = _children(win, nodes, level)
         evaluated += bound.size
-    best, best_lin = _best_candidate(win, nodes, bound, best, best_lin)
+    incumbent = _update_best(win, incumbent, nodes, bound)
     while any(open_nodes):
+        best = threshold if incumbent is None else max(threshold, incumbent[0])
         for level in range(top, 0, -1):
             pending = open_nodes[level]
             if not pending:
@@ -425,10 +441,13 @@ def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float 
             children, child_bound = _children(win, nodes, level)
             evaluated += child_bound.size
             if level == 1:
-                best, best_lin = _best_candidate(win, children, child_bound, best, best_lin)
+                incumbent = _update_best(win, incumbent, children, child_bound)
+                best = max(threshold, incumbent[0])
             else:
                 open_nodes[level - 1].append((children, child_bound))
-    return best, int(best_lin), evaluated
+    if incumbent is None or incumbent[0] < threshold:
+        return threshold - 1, -1, evaluated
+    return incumbent[0], -incumbent[2], evaluated
 
 
 def _covariance(win: _Window, a0: int, ix0: int, iy0: int, res: float) -> np.ndarray:
@@ -529,15 +548,14 @@ def match_scans_grid(
         return _failure(pose0, f"too few valid points in the reference scan ({ref.n_points} < {MIN_SCAN_POINTS})", n)
     win = _window(ref, cur, pose0, search, angular_resolution_rad)
     na, nx, ny = win.n
-    stats = dict(n_points=n, n_candidates=na * nx * ny, resolution_m=ref.resolution_m,
-                 angular_resolution_rad=win.angular_step)
+    stats = dict(n_candidates=na * nx * ny, resolution_m=ref.resolution_m, angular_resolution_rad=win.angular_step)
     threshold = max(1, int(math.ceil(min_score * n * RASTER_MAX - 1e-9)))
     search_fn = _branch_and_bound if method == "branch_and_bound" else _exhaustive
     best, lin, evaluated = search_fn(win, threshold)
     if best < threshold:
         why = ("no current point lands near the reference anywhere in the search window" if threshold == 1
                else f"no pose in the search window reaches min_score={min_score}")
-        return _failure(pose0, why, n_evaluated=evaluated, **stats)
+        return _failure(pose0, why, n, n_evaluated=evaluated, **stats)
     a, rest = divmod(lin, nx * ny)
     ix, iy = divmod(rest, ny)
     wa, wx, wy = win.steps.tolist()
@@ -545,8 +563,8 @@ def match_scans_grid(
     pose = np.array([pose0[0] + (ix - wx) * ref.resolution_m, pose0[1] + (iy - wy) * ref.resolution_m, win.angles[a]])
     return GridMatchResult(pose=pose, score=best / (n * RASTER_MAX),
                            covariance=_covariance(win, a, ix, iy, ref.resolution_m), ok=True,
-                           reason=f"best of {na * nx * ny} candidates ({method})", index=(da, ix - wx, iy - wy),
-                           n_evaluated=evaluated, **stats)
+                           reason=f"best of {na * nx * ny} candidates ({method})", n_points=n,
+                           index=(da, ix - wx, iy - wy), n_evaluated=evaluated, **stats)
 
 
 def match_scans_grid_ranges(
@@ -555,13 +573,23 @@ def match_scans_grid_ranges(
     reference_ranges: np.ndarray,
     reference_angles: np.ndarray,
     *,
+    initial_pose: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+    search_range: tuple[float, float, float] | np.ndarray = (4.0, 4.0, math.pi / 4),
+    resolution_m: float | None = None,
+    angular_resolution_rad: float | None = None,
     range_limits: tuple[float, float] | None = None,
-    **kwargs,
+    sigma_m: float | None = None,
+    min_score: float = 0.0,
+    method: str = "branch_and_bound",
 ) -> GridMatchResult:
     """:func:`match_scans_grid` on two scans given as ranges (m) and beam angles (rad).
 
     Beams with a non-finite or non-positive range (or outside ``range_limits``,
-    metres, when given) are dropped; ``kwargs`` go to :func:`match_scans_grid`.
+    metres, when given) are dropped, as LaserScan consumers do.
     """
-    return match_scans_grid(ranges_to_points(current_ranges, current_angles, range_limits),
-                            ranges_to_points(reference_ranges, reference_angles, range_limits), **kwargs)
+    return match_scans_grid(
+        ranges_to_points(current_ranges, current_angles, range_limits),
+        ranges_to_points(reference_ranges, reference_angles, range_limits),
+        initial_pose=initial_pose, search_range=search_range, resolution_m=resolution_m,
+        angular_resolution_rad=angular_resolution_rad, sigma_m=sigma_m, min_score=min_score, method=method,
+    )
