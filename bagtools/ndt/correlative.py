@@ -70,8 +70,8 @@ class _Pyramid:
     """Max-pooled levels 0..depth of a reference raster padded with zeros, flattened."""
 
     depth: int
-    pad_lo: np.ndarray  # (2,) zero cells added below the raster along x and y
-    pad_hi: np.ndarray  # (2,) zero cells added above
+    pad_lo: tuple[int, int]  # zero cells added below the raster along x and y
+    pad_hi: tuple[int, int]  # zero cells added above
     shape: tuple[int, int]
     levels: np.ndarray  # ((depth + 1) * shape[0] * shape[1],) uint16; level k at k * P + ix * shape[1] + iy
 
@@ -134,30 +134,33 @@ class CorrelativeReference:
         raster = np.rint(likelihood * RASTER_MAX).astype(np.uint16)
         return cls(res, sigma, len(pts), lo * res, raster)
 
-    def pyramid(self, depth: int, pad_lo: np.ndarray, pad_hi: np.ndarray) -> _Pyramid:
-        """Levels 0..``depth`` with at least ``pad_lo``/``pad_hi`` zero cells around the raster (cached)."""
+    def pyramid(self, depth: int, pad_lo: tuple[int, int], pad_hi: tuple[int, int]) -> _Pyramid:
+        """Levels 0..``depth`` with at least ``pad_lo``/``pad_hi`` zero cells (x, y) around the raster (cached)."""
         if self._pyramid:
             cached = self._pyramid[0]
-            if cached.depth >= depth and np.all(cached.pad_lo >= pad_lo) and np.all(cached.pad_hi >= pad_hi):
+            if (cached.depth >= depth and cached.pad_lo[0] >= pad_lo[0] and cached.pad_lo[1] >= pad_lo[1]
+                    and cached.pad_hi[0] >= pad_hi[0] and cached.pad_hi[1] >= pad_hi[1]):
                 return cached
+            # Grow to cover both the cached and the new request, so alternating windows do not rebuild.
             depth = max(depth, cached.depth)
-            pad_lo, pad_hi = np.maximum(pad_lo, cached.pad_lo), np.maximum(pad_hi, cached.pad_hi)
-        shape = np.array(self.raster.shape) + pad_lo + pad_hi
-        total = float(depth + 1) * float(shape[0]) * float(shape[1])
+            pad_lo = (max(pad_lo[0], cached.pad_lo[0]), max(pad_lo[1], cached.pad_lo[1]))
+            pad_hi = (max(pad_hi[0], cached.pad_hi[0]), max(pad_hi[1], cached.pad_hi[1]))
+        rx, ry = self.raster.shape
+        nx, ny = rx + pad_lo[0] + pad_hi[0], ry + pad_lo[1] + pad_hi[1]
+        total = float(depth + 1) * float(nx) * float(ny)
         if total > MAX_RASTER_CELLS:
-            raise ValueError(f"the search would need {depth + 1} rasters of {shape[0]} x {shape[1]} cells ({total:.3g}), "
+            raise ValueError(f"the search would need {depth + 1} rasters of {nx} x {ny} cells ({total:.3g}), "
                              f"above the limit of {MAX_RASTER_CELLS} (MAX_RASTER_CELLS): use a coarser resolution_m "
                              "or a smaller search_range")
-        nx, ny = int(shape[0]), int(shape[1])
         levels = np.zeros((depth + 1, nx, ny), dtype=np.uint16)
-        rx, ry = self.raster.shape
         levels[0, pad_lo[0]:pad_lo[0] + rx, pad_lo[1]:pad_lo[1] + ry] = self.raster
         for k in range(1, depth + 1):
             size = 1 << k
             # Window [i, i + size) in both axes: the maximum over the block above and to the right.
             ndimage.maximum_filter(levels[0], size=size, origin=-(size // 2), mode="constant", cval=0,
                                    output=levels[k])
-        built = _Pyramid(depth, np.asarray(pad_lo, np.intp), np.asarray(pad_hi, np.intp), (nx, ny), levels.reshape(-1))
+        built = _Pyramid(depth, (int(pad_lo[0]), int(pad_lo[1])), (int(pad_hi[0]), int(pad_hi[1])), (nx, ny),
+                         levels.reshape(-1))
         self._pyramid[:] = [built]
         return built
 
@@ -237,6 +240,7 @@ class _Window:
     stride: int  # flat index step of one x step (one y step is 1)
     levels: np.ndarray
     depth: int
+    child_steps: np.ndarray  # (3, 1, 4) x, y, flat offsets of the four children of a level-1 node
 
 
 def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, search: np.ndarray,
@@ -265,41 +269,43 @@ def _window(ref: CorrelativeReference, points: np.ndarray, pose0: np.ndarray, se
     # The coarsest level: blocks of 2^depth cells that cover the window in 2 x 2 (or fewer).
     depth = min(max(int(math.ceil(math.log2(max(nx, ny)))) - 1, 0), MAX_DEPTH)
     # Zero padding that makes clipping the binned points exact (see below): 2^depth + 2w below, 2w + 1 above.
-    w = np.array([wx, wy])
-    pyr = ref.pyramid(depth, (1 << depth) + 2 * w, 2 * w + 1)
+    side = 1 << depth
+    pyr = ref.pyramid(depth, (side + 2 * wx, side + 2 * wy), (2 * wx + 1, 2 * wy + 1))
     angles = pose0[2] + offsets
     c, s = np.cos(angles), np.sin(angles)
     # Rows 0..A-1: x, rows A..2A-1: y of the rotated points, in cells of the padded raster.
-    rot = np.concatenate((np.column_stack((c, -s)), np.column_stack((s, c)))) * (1.0 / res)
+    rot = np.empty((2 * na, 2))
+    rot[:na, 0], rot[:na, 1], rot[na:, 0], rot[na:, 1] = c, -s, s, c
+    rot *= 1.0 / res
     cells = rot @ points.T
     # A point whose cell is far outside the reference content scores 0 at every candidate and every level;
     # moving it to the nearest such cell keeps that and keeps every lookup inside the padded raster.
     # Clipped (to lo + 0.5 and hi + 0.5, safe from rounding) the cells are positive: truncation is the floor.
-    shift = (pose0[:2] - ref.origin) / res + pyr.pad_lo
-    lo = (pyr.pad_lo - (1 << depth) - w + 0.5 - shift).tolist()
-    hi = (pyr.pad_lo + np.array(ref.raster.shape) + w + 0.5 - shift).tolist()
-    for rows, axis in ((cells[:na], 0), (cells[na:], 1)):
-        np.maximum(rows, lo[axis], out=rows)
-        np.minimum(rows, hi[axis], out=rows)
-        rows += shift[axis]
+    for rows, axis, w in ((cells[:na], 0, wx), (cells[na:], 1, wy)):
+        shift = float((pose0[axis] - ref.origin[axis]) / res + pyr.pad_lo[axis])
+        np.maximum(rows, pyr.pad_lo[axis] - side - w + 0.5 - shift, out=rows)
+        np.minimum(rows, pyr.pad_lo[axis] + ref.raster.shape[axis] + w + 0.5 - shift, out=rows)
+        rows += shift
     icells = cells.astype(np.intp)
-    base = icells[:na] * pyr.shape[1]
+    stride = pyr.shape[1]
+    base = icells[:na] * stride
     base += icells[na:]
-    base -= wx * pyr.shape[1] + wy  # the window's first candidate: initial pose - (wx, wy) cells
+    base -= wx * stride + wy  # the window's first candidate: initial pose - (wx, wy) cells
     wrapped = (angles + np.pi) % (2 * np.pi) - np.pi
     return _Window(np.array([wa, wx, wy]), (na, nx, ny), wrapped, angular_step, base,
-                   pyr.shape[0] * pyr.shape[1], pyr.shape[1], pyr.levels, depth)
+                   pyr.shape[0] * stride, stride, pyr.levels, depth,
+                   np.stack((_CHILD_DX, _CHILD_DY, _CHILD_DX * stride + _CHILD_DY))[:, None, :])
 
 
-def _scores(win: _Window, a: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """Integer score sums (int64) of nodes: angle index ``a`` and flat ``offset`` (level and x, y corner)."""
+def _scores(win: _Window, a: np.ndarray, xy: np.ndarray, level: int) -> np.ndarray:
+    """Integer score sums (int64) of nodes at ``level``: angle index ``a``, flat x, y corner ``xy`` (ix * stride + iy)."""
     n_points = win.base.shape[1]
     step = max(1, _CHUNK_LOOKUPS // max(n_points, 1))
     if len(a) <= step:
         idx = win.base.take(a, axis=0)
-        idx += offset[:, None]
+        idx += (xy + level * win.plane)[:, None]
         return win.levels.take(idx).sum(axis=1, dtype=np.int64)
-    return np.concatenate([_scores(win, a[i:i + step], offset[i:i + step]) for i in range(0, len(a), step)])
+    return np.concatenate([_scores(win, a[i:i + step], xy[i:i + step], level) for i in range(0, len(a), step)])
 
 
 def _preferred(win: _Window, lin: np.ndarray) -> tuple[int, int]:
@@ -309,10 +315,15 @@ def _preferred(win: _Window, lin: np.ndarray) -> tuple[int, int]:
     theta, x and y), then to the lowest linear index (theta, x, y order).
     """
     na, nx, ny = win.n
+    wa, wx, wy = win.steps.tolist()
+    centre_a = wa if wa >= 0 else na // 2
+    if lin.size == 1:
+        a, rest = divmod(int(lin[0]), nx * ny)
+        ix, iy = divmod(rest, ny)
+        return -((a - centre_a) ** 2 + (ix - wx) ** 2 + (iy - wy) ** 2), -int(lin[0])
     a, rest = np.divmod(lin, nx * ny)
     ix, iy = np.divmod(rest, ny)
-    wa, wx, wy = win.steps.tolist()
-    d2 = (a - (wa if wa >= 0 else na // 2)) ** 2 + (ix - wx) ** 2 + (iy - wy) ** 2
+    d2 = (a - centre_a) ** 2 + (ix - wx) ** 2 + (iy - wy) ** 2
     i = np.lexsort((lin, d2))[0]
     return -int(d2[i]), -int(lin[i])
 
@@ -324,7 +335,7 @@ def _exhaustive(win: _Window, threshold: int) -> tuple[int, int, int]:
     n_points = win.base.shape[1]
     best: tuple[int, int, int] | None = None  # (score, -distance^2, -lin): the larger the better
     if len(offs) * n_points > _CHUNK_LOOKUPS:  # one angle at a time, translations in chunks
-        chunks = ((a, _scores(win, np.full(len(offs), a), offs)) for a in range(na))
+        chunks = ((a, _scores(win, np.full(len(offs), a), offs, 0)) for a in range(na))
     else:  # several angles at a time
         per_angle = max(1, _CHUNK_LOOKUPS // (n_points * len(offs)))
         chunks = ((a0, np.sum(win.levels.take(win.base[a0:a0 + per_angle, None, :] + offs[None, :, None]), axis=2,
@@ -341,25 +352,27 @@ def _exhaustive(win: _Window, threshold: int) -> tuple[int, int, int]:
     return best[0], -best[2], na * nx * ny
 
 
+# Node tables of the branch and bound: rows angle index, x corner, y corner, ix * stride + iy; one column a node.
+_NODE_ROWS = 4
 # Child corners of a node, in halves of its side: (x, y) = (0, 0), (0, 1), (1, 0), (1, 1).
 _CHILD_DX = np.array([0, 0, 1, 1])
 _CHILD_DY = np.array([0, 1, 0, 1])
 
 
 def _children(win: _Window, parents: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
-    """The level-(``level`` - 1) children of level-``level`` nodes (3, M) (rows: angle, x, y corner) and their scores."""
+    """The level-(``level`` - 1) children of level-``level`` nodes (a node table) and their scores."""
     half = 1 << (level - 1)
+    m = parents.shape[1]
     nodes = np.repeat(parents, 4, axis=1)
-    nodes[1] += np.tile(_CHILD_DX * half, parents.shape[1])
-    nodes[2] += np.tile(_CHILD_DY * half, parents.shape[1])
-    if nodes.shape[1] and (nodes[1].max() >= win.n[1] or nodes[2].max() >= win.n[2]):
+    nodes.reshape(_NODE_ROWS, m, 4)[1:] += win.child_steps << (level - 1)
+    if m and (int(parents[1].max()) + half >= win.n[1] or int(parents[2].max()) + half >= win.n[2]):
         nodes = nodes[:, (nodes[1] < win.n[1]) & (nodes[2] < win.n[2])]
-    return nodes, _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + (level - 1) * win.plane)
+    return nodes, _scores(win, nodes[0], nodes[3], level - 1)
 
 
 def _update_best(win: _Window, best: tuple[int, int, int] | None, nodes: np.ndarray,
                  scores: np.ndarray) -> tuple[int, int, int] | None:
-    """The incumbent (score, -distance^2, -lin) after scoring candidates ``nodes`` (3, M) with ``scores``."""
+    """The incumbent (score, -distance^2, -lin) after scoring candidates ``nodes`` (a node table) with ``scores``."""
     if not scores.size:
         return best
     top = int(scores.max())
@@ -390,17 +403,18 @@ def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float 
     top = win.depth
     side = 1 << top
     cx, cy = np.arange(0, nx, side), np.arange(0, ny, side)
-    nodes = np.empty((3, na * len(cx) * len(cy)), dtype=np.int64)
+    nodes = np.empty((_NODE_ROWS, na * len(cx) * len(cy)), dtype=np.int64)
     nodes[0] = np.repeat(np.arange(na), len(cx) * len(cy))
     nodes[1] = np.tile(np.repeat(cx, len(cy)), na)
     nodes[2] = np.tile(cy, na * len(cx))
-    bound = _scores(win, nodes[0], nodes[1] * win.stride + nodes[2] + top * win.plane)
+    nodes[3] = nodes[1] * win.stride + nodes[2]
+    bound = _scores(win, nodes[0], nodes[3], top)
     evaluated = bound.size
     incumbent: tuple[int, int, int] | None = None  # (score, -distance^2, -lin) of the best candidate so far
     if top == 0:  # a window of one cell in x and y: the roots are the candidates
         incumbent = _update_best(win, incumbent, nodes, bound)
         nodes, bound = nodes[:, :0], bound[:0]
-    # Open nodes of each level: lists of (nodes (3, M), bounds (M,)), concatenated when the level is swept.
+    # Open nodes of each level: lists of (node table, bounds), concatenated when the level is swept.
     open_nodes: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(top + 1)]
     for level in range(top, 0, -1):  # the dive
         if bound.size > beam:
@@ -469,8 +483,11 @@ def _covariance(win: _Window, a0: int, ix0: int, iy0: int, res: float) -> np.nda
     log_l = _LOG_LIKELIHOOD.take(win.levels.take(idx)).sum(axis=2).reshape(-1)  # (angle, x, y) flattened
     w = np.exp(log_l - log_l.max())
     w /= w.sum()
-    ga, gx, gy = np.meshgrid(da * win.angular_step, dx * res, dy * res, indexing="ij")
-    d = np.stack((gx.reshape(-1), gy.reshape(-1), ga.reshape(-1)))  # (3, M): x, y, theta offsets from the best
+    d = np.empty((3, len(da), len(dx), len(dy)))  # x, y, theta offsets of each candidate from the best
+    d[0] = (dx * res)[None, :, None]
+    d[1] = (dy * res)[None, None, :]
+    d[2] = (da * win.angular_step)[:, None, None]
+    d = d.reshape(3, -1)
     centred = d - (d @ w)[:, None]
     cov = (centred * w) @ centred.T
     return cov + np.diag([res * res / 12.0, res * res / 12.0, win.angular_step**2 / 12.0])
