@@ -17,15 +17,31 @@ indices, so all translations of one angle are gathers from the same raster.
 
 The search is the multi-resolution branch and bound of W. Hess et al., "Real-time
 loop closure in 2D LIDAR SLAM", ICRA 2016: level k of a precomputed stack of
-rasters holds at each cell the maximum of the raster over the 2^k x 2^k cells
-above and to the right of it, so scoring a node (an angle and a 2^k x 2^k block
-of translations) at level k bounds the score of every candidate in it from above.
-Nodes are expanded best-first (highest bound first), in vectorized batches,
-until no open node's bound can beat the best candidate found; the result is the
+rasters (``scipy.ndimage.maximum_filter``) holds at each cell the maximum of
+the raster over the 2^k x 2^k cells above and to the right of it, so scoring a
+node (an angle and a 2^k x 2^k block of translations) at level k bounds the
+score of every candidate in it from above. The roots are the blocks of the
+coarsest level (2 x 2 of them cover the window, at most 2^7 cells a side). A
+beam dive to the candidates gives a good first incumbent; then the open nodes
+are expanded best first, level by level in vectorized batches, and every node
+bounded below the incumbent is dropped, until none is open. The result is the
 exact best candidate of the window (of equal scores, the one fewest steps from
 the initial pose, then the first in theta, x, y order), the same as
-:func:`match_scans_grid` with ``method="exhaustive"``.
+:func:`match_scans_grid` with ``method="exhaustive"`` (tests compare them).
 
+The score is the mean raster value over the current points, in [0, 1]; the
+covariance follows Olson: the likelihood-weighted spread of the candidates
+around the best (see :class:`GridMatchResult`).
+
+Speed (bench/bench_ndt.py, one core, LDS-01 scans of about 300 points): a
+window of +-0.3 m, +-0.3 rad at 5 cm (about 7000 candidates) takes about 1 ms
+against a prebuilt reference and 2 ms including building it, about 5x less
+than scoring every candidate (the search alone, without binning the points and
+the covariance, about 10x); a window of +-4 m and every heading (about 11
+million candidates) against a local map of 5 scans takes about 20-30 ms, some
+600x less than the exhaustive search's 13 s. Followed by NDT (widened cells of
+0.5 m), the +-0.3 m window from a zero initial pose recovers every pair of the
+bench within 2 cm and 0.5 degrees.
 Pose convention, as :func:`bagtools.ndt.match_scans`: the pose [x, y, theta]
 (m, m, rad) is the pose of the current scan's frame in the reference frame,
 ``p_ref = R(theta) p_cur + [x, y]``.
@@ -58,9 +74,6 @@ METHODS = ("branch_and_bound", "exhaustive")
 # Per-point log-likelihood of a raster value (floored at the kernel cutoff), for the covariance.
 _LOG_LIKELIHOOD = np.maximum(np.log(np.maximum(np.arange(RASTER_MAX + 1), 0.5) / RASTER_MAX),
                              -0.5 * KERNEL_CUTOFF_SIGMAS**2).astype(np.float32)
-# Best-first batches: expand at least this many open nodes per step, and at most this fraction of them.
-_MIN_BATCH = 32
-_BATCH_FRACTION = 0.25
 # Gathers are done in chunks of about this many lookups to bound temporary memory.
 _CHUNK_LOOKUPS = 1 << 21
 
