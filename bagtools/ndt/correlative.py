@@ -36,12 +36,13 @@ around the best (see :class:`GridMatchResult`).
 Speed (bench/bench_ndt.py, one core, LDS-01 scans of about 300 points): a
 window of +-0.3 m, +-0.3 rad at 5 cm (about 7000 candidates) takes about 1 ms
 against a prebuilt reference and 2 ms including building it, about 5x less
-than scoring every candidate (the search alone, without binning the points and
-the covariance, about 10x); a window of +-4 m and every heading (about 11
-million candidates) against a local map of 5 scans takes about 20-30 ms, some
-600x less than the exhaustive search's 13 s. Followed by NDT (widened cells of
-0.5 m), the +-0.3 m window from a zero initial pose recovers every pair of the
-bench within 2 cm and 0.5 degrees.
+than scoring every candidate (the search step alone, without binning the points
+and the covariance, 7-10x); a window of +-4 m and every heading (about 11
+million candidates) against a local map of 5 scans takes about 20-25 ms, some
+500x less than the exhaustive search's 9-12 s. Followed by NDT (widened cells
+of 0.5 m), the +-0.3 m window from a zero initial pose recovers every pair of
+the bench within 2 cm and 0.5 degrees.
+
 Pose convention, as :func:`bagtools.ndt.match_scans`: the pose [x, y, theta]
 (m, m, rad) is the pose of the current scan's frame in the reference frame,
 ``p_ref = R(theta) p_cur + [x, y]``.
