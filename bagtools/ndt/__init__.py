@@ -4,9 +4,20 @@
 scan's frame in the reference scan's frame (``p_ref = R(theta) p_cur + [x, y]``)
 and MATLAB ``matchScans``-style stats; ``match_scans_ranges`` takes ranges and
 angles. Build an :class:`NdtReference` once to match several scans against it.
+
+``match_scans_grid(current, reference, search_range=...)`` is the search-based
+matcher (MATLAB ``matchScansGrid``): correlative scan matching over a window
+around an initial pose, by branch and bound on max-pooled likelihood rasters;
+same pose convention, returns the best pose of the discretized window with a
+score and a covariance. Build a :class:`CorrelativeReference` once to match
+many scans against one reference or local map.
 """
 
+from bagtools.ndt.correlative import CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_ranges
 from bagtools.ndt.grid import NdtReference
 from bagtools.ndt.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
 
-__all__ = ["MIN_SCAN_POINTS", "NdtReference", "NdtResult", "match_scans", "match_scans_ranges", "ranges_to_points"]
+__all__ = [
+    "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult", "match_scans",
+    "match_scans_grid", "match_scans_grid_ranges", "match_scans_ranges", "ranges_to_points",
+]
