@@ -17,9 +17,10 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.outputs import atomic_path, check_writable
 from bagtools.progress import progress_bar
+from bagtools.transforms import pose2tform, se2_compose
 from simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, amcl_map_to_odom
 from simulate.robot.controller import Limits, Motion, drive
-from simulate.robot.odometry import ODOM_NOISE_LEVELS, Odometry, se2_compose, wheel_odometry
+from simulate.robot.odometry import ODOM_NOISE_LEVELS, Odometry, wheel_odometry
 from simulate.robot.routes import ROUTE_NAMES, make_route
 from simulate.robot.waffle import (
     MAX_ANGULAR_RADPS,
@@ -31,7 +32,6 @@ from simulate.robot.waffle import (
 from simulate.sensors import DepthCamera, Lidar
 from simulate.world import World, load_world
 from simulate.writer import ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
-from bagtools.transforms import pose2tform
 
 ODOM_RATE_HZ = 30
 STEPS_PER_SCAN = 6  # 5 Hz scans at the 30 Hz odometry rate

@@ -44,7 +44,16 @@ transforms, and :func:`wrap_to_pi` (to (-pi, pi]).
 
 from bagtools.transforms.axisangle import axang2rotm, axang2tform, rotm2axang, tform2axang
 from bagtools.transforms.checks import EULER_SEQUENCES, ROTATION_TOL
-from bagtools.transforms.planar import pose2tform, pose2tform2d, tform2d2pose, tform2pose, wrap_to_pi
+from bagtools.transforms.planar import (
+    pose2tform,
+    pose2tform2d,
+    se2_between,
+    se2_compose,
+    se2_inverse,
+    tform2d2pose,
+    tform2pose,
+    wrap_to_pi,
+)
 from bagtools.transforms.quaternions import (
     axang2quat,
     eul2quat,
@@ -96,6 +105,9 @@ __all__ = [
     "rotm2eul",
     "rotm2quat",
     "rotm2tform",
+    "se2_between",
+    "se2_compose",
+    "se2_inverse",
     "tform2axang",
     "tform2d2pose",
     "tform2eul",

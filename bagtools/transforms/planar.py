@@ -73,3 +73,28 @@ def tform2d2pose(tform2d: np.ndarray) -> np.ndarray:
     tform_arr, single = as_stack(tform2d, "tform2d", (3, 3))
     check_tforms(tform_arr, "tform2d", single)
     return unstack(_poses(tform_arr), single)
+
+
+def se2_compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Compose planar poses [x, y, theta]: a then b, b expressed in a's frame (T_w_b = T_w_a T_a_b).
+
+    Broadcasts over leading dimensions; theta is a_theta + b_theta, not wrapped.
+    """
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1], a[..., 1] + s * b[..., 0] + c * b[..., 1],
+                     a[..., 2] + b[..., 2]], axis=-1)
+
+
+def se2_inverse(a: np.ndarray) -> np.ndarray:
+    """Inverse of planar poses [x, y, theta] (T_b_a from T_a_b); broadcasts over leading dimensions."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([-(c * a[..., 0] + s * a[..., 1]), s * a[..., 0] - c * a[..., 1], -a[..., 2]], axis=-1)
+
+
+def se2_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pose of b in a's frame, inverse(a) then b, theta wrapped to (-pi, pi]; broadcasts."""
+    d = se2_compose(se2_inverse(a), b)
+    d[..., 2] = wrap_to_pi(d[..., 2])
+    return d

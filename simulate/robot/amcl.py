@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simulate.robot.kinematics import wrap_angle
-from simulate.robot.odometry import se2_compose, se2_inverse
+from bagtools.transforms import se2_compose, se2_inverse
 
 UPDATE_MIN_D_M = 0.2
 UPDATE_MIN_A_RAD = 0.5

@@ -86,16 +86,3 @@ def wheel_odometry(motion: Motion, level: str, rng: np.random.Generator) -> Odom
     poses = integrate_increments((0.0, 0.0, 0.0), ds, dyaw)
     return Odometry(poses, ds / motion.dt_s, dyaw / motion.dt_s, float(scale_l), float(scale_r), float(scale_b))
 
-
-def se2_compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Compose SE(2) poses [x, y, yaw]: a ∘ b (b expressed in a's frame); broadcasts over rows."""
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1], a[..., 1] + s * b[..., 0] + c * b[..., 1], a[..., 2] + b[..., 2]], axis=-1)
-
-
-def se2_inverse(a: np.ndarray) -> np.ndarray:
-    """Inverse of SE(2) poses [x, y, yaw]; broadcasts over rows."""
-    a = np.asarray(a, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    return np.stack([-(c * a[..., 0] + s * a[..., 1]), s * a[..., 0] - c * a[..., 1], -a[..., 2]], axis=-1)

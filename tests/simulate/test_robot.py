@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from bagtools.errors import BagtoolsError
+from bagtools.transforms import se2_compose, se2_inverse
 from simulate.robot import ROUTE_NAMES, Limits, amcl_map_to_odom, drive, make_route, wheel_odometry
 from simulate.robot.amcl import UPDATE_MIN_A_RAD, UPDATE_MIN_D_M
 from simulate.robot.kinematics import integrate_increments, wrap_angle
-from simulate.robot.odometry import se2_compose, se2_inverse
 from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS, ROBOT_RADIUS_M, T_base_footprint_frame
 from simulate.world import load_world
 
