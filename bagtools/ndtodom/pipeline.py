@@ -387,3 +387,16 @@ def _tf_arrays(parent: str, child: str, stamps_ns: np.ndarray, T: np.ndarray) ->
     n = len(stamps_ns)
     return TfArrays(np.full(n, parent, dtype=object), np.full(n, child, dtype=object),
                     np.asarray(stamps_ns, dtype=np.int64), T[:, :3, 3].copy(), quat2xyzw(tform2quat(T)))
+
+
+def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None) -> NdtOdomResult:
+    """The laser-odometry front end of a bag, as ``ndt-odom`` computes it: for ``slam`` and scripts.
+
+    ``result.front_end`` is the :class:`~bagtools.ndtodom.steps.FrontEndRun`
+    (every scan: base pose in the odometry frame, points in the base frame,
+    keyframes with their matches and covariances); ``result.odometry`` and
+    ``result.ground_truth`` the bag's wheel odometry and reference at the scan
+    stamps (None when absent); ``result.problem`` says why nothing could be
+    registered. Pass ``NdtOdomOptions(use_odometry=False)`` to ignore the wheels.
+    """
+    return NdtOdomPipeline(bag_path, options or NdtOdomOptions()).run()
