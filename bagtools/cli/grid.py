@@ -6,6 +6,8 @@ import json
 
 import click
 
+from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
+
 
 @click.command("grid")
 @click.argument("bag", type=click.Path(path_type=str))
@@ -14,15 +16,18 @@ import click
 @click.option("--poses", default="tf", show_default=True, metavar="tf|ground-truth|TRAJ.tum",
               help="Scan poses: the bag's tf, the simulator's /ground_truth, or a TUM trajectory of the robot base "
                    "in --frame (e.g. bagtools ndt-odom's trajectory.tum).")
-@click.option("--frame", default="map", show_default=True, help="Fixed frame to build the map in.")
+@click.option("--frame", default=None,
+              help="Fixed frame to build the map in  [default: map, or the frame a bagtools TUM file --poses names]")
 @click.option("--resolution", type=float, default=20.0, show_default=True, help="Cells per metre (20: 5 cm cells).")
 @click.option("--max-range", type=float, default=None,
               help="Lower the scans' range_max to this [m]; farther returns only clear free space.")
 @click.option("--base-frame", default=None,
               help="Robot frame a TUM trajectory describes (default: /odom's child frame, or base_footprint/base_link).")
+@click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
+              help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str, resolution: float, max_range: float | None,
-         base_frame: str | None, force: bool) -> None:
+def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, resolution: float, max_range: float | None,
+         base_frame: str | None, scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
     """Build an occupancy grid of BAG's laser scans ("mapping with known poses").
 
     Writes OUT/map.pgm + OUT/map.yaml (ROS map_server / nav2 format: load with
@@ -34,15 +39,17 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str, resolution:
     Example:
       bagtools grid out/sim --out out/grid
       bagtools grid out/sim --out out/grid_odom --frame odom --force
-      bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum --frame odom
+      bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum
+      bagtools grid real.bag --out grid --scan-frame-offset -0.064,0,0
     """
     from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
     from bagtools.outputs import check_outputs
 
     check_outputs(out_dir, GRID_MAP_FILES, force)  # fail before the work, not after it
 
-    options = GridMapOptions(topic=topic, frame=frame, poses=poses, resolution=resolution, max_range_m=max_range,
-                             base_frame=base_frame)
+    options = GridMapOptions(topic=topic, frame=frame or GridMapOptions.default_frame(poses), poses=poses,
+                             resolution=resolution, max_range_m=max_range, base_frame=base_frame,
+                             scan_frame_offset=scan_frame_offset)
     result = GridMapPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

@@ -4,15 +4,7 @@ from __future__ import annotations
 
 import click
 
-
-def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
-    if value is None:
-        return None
-    try:
-        x, y, yaw = (float(v) for v in value.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected X,Y,YAW (metres, metres, radians), got {value!r}") from None
-    return (x, y, yaw)
+from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 
 
 @click.command("ndt-odom")
@@ -38,8 +30,8 @@ def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tu
 @click.option("--max-speed", type=float, default=1.5, show_default=True,
               help="Fastest the robot moves [m/s]: bounds constant velocity and the search.")
 @click.option("--max-turn-rate", type=float, default=2.0, show_default=True, help="Fastest the robot turns [rad/s].")
-@click.option("--scan-frame-offset", callback=_offset, default=None, metavar="X,Y,YAW",
-              help="Laser pose on the robot base [m, m, rad] when tf lacks (or has a wrong) base -> laser transform.")
+@click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
+              help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, reference: str,
              cell_size: float | None, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,

@@ -75,15 +75,22 @@ class TfScanPoses:
     """Scan poses from the bag's tf: T_frame_scan = lookup(frame, scan frame, stamp).
 
     When the scan frame is not in tf, ``base_frame`` stands in for it (warned once per frame).
+    With ``T_base_scan`` (4,4) (the laser mount, given by the user), T_frame_scan =
+    lookup(frame, base_frame, stamp) @ T_base_scan.
     """
 
-    def __init__(self, buffer: TfBuffer, frame: str, base_frame: str | None) -> None:
+    def __init__(self, buffer: TfBuffer, frame: str, base_frame: str | None,
+                 T_base_scan: np.ndarray | None = None) -> None:
         self.buffer = buffer
         self.frame = frame
         self.base_frame = base_frame
+        self.T_base_scan = T_base_scan
         self.warnings: list[str] = []
 
     def lookup(self, body_frame: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.T_base_scan is not None and self.base_frame:  # the mount is given: the base's pose from tf
+            T, reasons = _tf_lookup(self.buffer, self.frame, self.base_frame, np.asarray(stamps_ns, dtype=np.int64))
+            return T @ self.T_base_scan, reasons
         source = body_frame
         if not self.buffer.has_frame(body_frame) and self.base_frame and self.buffer.has_frame(self.base_frame):
             _warn_once(self.warnings, NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=body_frame))
@@ -102,12 +109,13 @@ class TrajectoryScanPoses:
     """
 
     def __init__(self, stamps_ns: np.ndarray, T_frame_base: np.ndarray, frame: str, base_frame: str,
-                 buffer: TfBuffer) -> None:
+                 buffer: TfBuffer, T_base_scan: np.ndarray | None = None) -> None:
         if frame == base_frame:
             raise BagtoolsError(f"the trajectory's base frame must differ from --frame, both are {frame!r}")
         self.frame = frame
         self.base_frame = base_frame
         self.buffer = buffer
+        self.T_base_scan = T_base_scan
         self.warnings: list[str] = []
         T_frame_base = np.asarray(T_frame_base, dtype=np.float64)
         self._trajectory = TfBuffer()
@@ -119,6 +127,8 @@ class TrajectoryScanPoses:
         stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
         T_frame_base, valid = self._trajectory.lookup(self.frame, self.base_frame, stamps_ns, return_mask=True)
         reasons = _reasons_by_span(valid, stamps_ns, self.span)
+        if self.T_base_scan is not None:
+            return T_frame_base @ self.T_base_scan, reasons
         if body_frame == self.base_frame:
             return T_frame_base, reasons
         if not (self.buffer.has_frame(body_frame) and self.buffer.has_frame(self.base_frame)):

@@ -27,7 +27,9 @@ class GridMapOptions:
     ``resolution``: cells per metre. ``max_range_m``: lowers each scan's
     range_max (None keeps it). ``base_frame``: the robot frame a trajectory
     (TUM) describes; None picks the ``/odom`` child frame, else base_footprint
-    or base_link from tf. ``max_cells``: refuse to build a larger grid.
+    or base_link from tf (or the body a bagtools TUM file names).
+    ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the base,
+    overriding (or standing in for) tf. ``max_cells``: refuse to build a larger grid.
     """
 
     topic: str = "/scan"
@@ -36,6 +38,7 @@ class GridMapOptions:
     resolution: float = 20.0
     max_range_m: float | None = None
     base_frame: str | None = None
+    scan_frame_offset: tuple[float, float, float] | None = None
     max_cells: int = MAX_GRID_CELLS
 
     def __post_init__(self) -> None:
@@ -50,8 +53,19 @@ class GridMapOptions:
             raise BagtoolsError("--poses must be 'tf', 'ground-truth' or a TUM file")
         if self.poses == POSES_GROUND_TRUTH and self.frame != "map":
             raise BagtoolsError(f"--poses ground-truth gives poses in the map frame; use --frame map, not {self.frame!r}")
+        if self.scan_frame_offset is not None and (len(self.scan_frame_offset) != 3
+                                                   or not all(math.isfinite(v) for v in self.scan_frame_offset)):
+            raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
         if self.max_cells <= 0:
             raise BagtoolsError(f"max_cells must be positive, got {self.max_cells}")
+
+    @staticmethod
+    def default_frame(poses: str) -> str:
+        """The fixed frame to map in when none is given: the frame a bagtools TUM file names, else map."""
+        from bagtools.trajectory import read_tum_frames
+
+        named = read_tum_frames(poses) if poses not in (POSES_TF, POSES_GROUND_TRUTH) else None
+        return named[0] if named else "map"
 
     @property
     def poses_kind(self) -> str:

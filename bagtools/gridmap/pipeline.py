@@ -36,16 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
+from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
-from bagtools.tf.repair import repair_dynamic_tf, guess_base_frame
-from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks
 from bagtools.io import LASERSCAN_TYPES, BagReader, open_bag, read_tf_arrays
 from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import TfBuffer
-from bagtools.trajectory import read_tum
+from bagtools.tf.repair import guess_base_frame, repair_dynamic_tf
+from bagtools.trajectory import read_tum, read_tum_frames
+from bagtools.transforms import pose2tform
 
 SKIP_NO_VALID_RANGES = "no valid ranges"
 SKIP_NO_MAX_RANGE = "range_max not positive (give --max-range)"
@@ -119,22 +120,29 @@ class GridMapPipeline:
 
     def _pose_source(self, bag: BagReader) -> ScanPoseSource:
         opts = self.options
+        offset = None if opts.scan_frame_offset is None else pose2tform(np.asarray(opts.scan_frame_offset))
         if opts.poses_kind == POSES_TF:
             self.base_frame = self._base_frame(bag)
-            return TfScanPoses(self.buffer, opts.frame, self.base_frame)
+            if offset is not None and not self.base_frame:
+                raise BagtoolsError("--scan-frame-offset needs the robot base frame: give --base-frame", bag.path)
+            return TfScanPoses(self.buffer, opts.frame, self.base_frame, offset)
         if opts.poses_kind == POSES_GROUND_TRUTH:
             truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 raise BagtoolsError("--poses ground-truth needs a /ground_truth topic (written by bagtools simulate)",
                                     bag.path)
             stamps, T_map_base, self.base_frame = truth
-            return TrajectoryScanPoses(stamps, T_map_base, opts.frame, self.base_frame, self.buffer)
+            return TrajectoryScanPoses(stamps, T_map_base, opts.frame, self.base_frame, self.buffer, offset)
         trajectory = read_tum(opts.poses)
-        base = self._base_frame(bag)
+        named = read_tum_frames(opts.poses)  # what ndt-odom and slam record in their TUM files
+        if named is not None and named[0] != opts.frame:
+            raise BagtoolsError(f"the trajectory is in frame {named[0]!r}, not {opts.frame!r}: give --frame {named[0]}",
+                                opts.poses)
+        base = opts.base_frame or (named[1] if named else None) or self._base_frame(bag)
         if base is None:
             raise BagtoolsError("cannot tell which robot frame the trajectory describes: give --base-frame", opts.poses)
         self.base_frame = base
-        return TrajectoryScanPoses(trajectory.stamps_ns, trajectory.poses, opts.frame, base, self.buffer)
+        return TrajectoryScanPoses(trajectory.stamps_ns, trajectory.poses, opts.frame, base, self.buffer, offset)
 
     def _map_scans(self, bag: BagReader) -> OccupancyGrid:
         self.scan_stream = ScanStream(bag, self.options.topic, desc="grid")

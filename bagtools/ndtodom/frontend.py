@@ -448,7 +448,8 @@ def _voxel_filter(points: np.ndarray, voxel_m: float) -> np.ndarray:
     stop outweighing the far features that tell one place in a corridor from the next."""
     if voxel_m <= 0 or len(points) == 0:
         return points
-    from bagtools.cloudmap.accumulator import voxel_downsample
-
-    xyz = np.column_stack((points, np.zeros(len(points))))
-    return voxel_downsample(xyz, voxel_m)[:, :2].astype(np.float64)
+    keys = np.floor(points / voxel_m).astype(np.int64)
+    _, voxel, counts = np.unique(keys[:, 0] * 4_000_037 + keys[:, 1], return_inverse=True, return_counts=True)
+    sums = np.zeros((counts.size, 2))
+    np.add.at(sums, voxel.reshape(-1), points)
+    return sums / counts[:, None]

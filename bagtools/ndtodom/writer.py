@@ -22,13 +22,14 @@ def write_ndt_odom(result: NdtOdomResult, out_dir: str | Path, force: bool = Fal
     summary.json always.
     """
     frame = result.summary.get("odometry_frame", "odom")
+    body = result.summary.get("base_frame")
     written: list[str] = []
     with OutputDir(out_dir, NDT_ODOM_FILES, force) as staged:
         if result.trajectory is not None:
             for name, traj in (("trajectory.tum", result.trajectory), ("odometry.tum", result.odometry),
                                ("ground_truth.tum", result.ground_truth)):
                 if traj is not None:
-                    (staged / name).write_text(tum_text(traj))
+                    (staged / name).write_text(tum_text(traj, frame, body))
                     written.append(name)
             render_trajectories_png(staged / "trajectory.png", frame, result.trajectory, result.odometry,
                                     result.ground_truth, title=f"{result.summary.get('topic', '')}: NDT laser odometry")

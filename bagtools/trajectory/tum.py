@@ -43,19 +43,41 @@ class Trajectory:
         return Trajectory(np.asarray(stamps_ns, dtype=np.int64), poses)
 
 
-def tum_text(trajectory: Trajectory) -> str:
-    """The TUM lines of a trajectory (stamps in seconds with ns precision)."""
+def tum_text(trajectory: Trajectory, frame: str | None = None, body: str | None = None) -> str:
+    """The TUM lines of a trajectory (stamps in seconds with ns precision).
+
+    With ``frame`` and ``body``, a first comment line ``# frame: F body: B``
+    records which frame the poses are in and which robot frame they describe
+    (evo and other TUM readers skip comments; :func:`read_tum_frames` reads it).
+    """
     quat_xyzw = quat2xyzw(tform2quat(trajectory.poses)) if len(trajectory) else np.empty((0, 4))
-    lines = []
+    lines = [f"# frame: {frame} body: {body}"] if frame and body else []
     for stamp_ns, xyz, q in zip(trajectory.stamps_ns, trajectory.positions, quat_xyzw):
         seconds = f"{int(stamp_ns) // 1_000_000_000}.{int(stamp_ns) % 1_000_000_000:09d}"
         lines.append(seconds + " " + " ".join(f"{v:.9f}" for v in (*xyz, *q)))
     return "\n".join(lines) + ("\n" if lines else "")
 
 
-def write_tum(path: str | Path, trajectory: Trajectory, force: bool = False) -> Path:
-    """Write ``trajectory`` as a TUM file, atomically."""
-    return write_text_atomic(path, tum_text(trajectory), force)
+def read_tum_frames(path: str | Path) -> tuple[str, str] | None:
+    """(frame, body) from a TUM file's ``# frame: F body: B`` comment (as bagtools writes), or None."""
+    try:
+        with Path(path).open(encoding="utf-8", errors="replace") as f:
+            for line in f:
+                text = line.strip()
+                if not text.startswith("#"):
+                    return None
+                words = text.lstrip("#").split()
+                if len(words) == 4 and words[0] == "frame:" and words[2] == "body:":
+                    return words[1], words[3]
+    except OSError:
+        return None
+    return None
+
+
+def write_tum(path: str | Path, trajectory: Trajectory, force: bool = False, frame: str | None = None,
+              body: str | None = None) -> Path:
+    """Write ``trajectory`` as a TUM file, atomically (with the frames comment when given)."""
+    return write_text_atomic(path, tum_text(trajectory, frame, body), force)
 
 
 #: Positions farther than this from the origin are damage, not a robot's path (metres).
