@@ -63,6 +63,8 @@ CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO = 0.05, 0.03, 0.2
 PRIOR_WEIGHT_DEFAULT = 0.01
 #: What overruling the odometry costs, in normalized score (see _Prior).
 OUTLIER_COST = 0.3
+#: Without odometry: constant velocity's narrow spread (m, rad, share of the motion), and what overruling it costs.
+CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.08
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
 PRIOR_GATE2 = 14.0
 #: Keyframes of the submap lie within this distance of the newest one (m).
@@ -181,6 +183,8 @@ class _Prior:
     sd: np.ndarray
     weight: float = PRIOR_WEIGHT_DEFAULT
     wide: _Prior | None = None
+    outlier_cost: float = 0.0
+    kind: str = "kinematic"
 
     def mahalanobis2(self, pose: np.ndarray) -> float:
         d = se2_between(self.mean, pose)
@@ -191,7 +195,7 @@ class _Prior:
         narrow = self.mahalanobis2(pose)
         if self.wide is None:
             return narrow
-        return min(narrow, self.wide.cost(pose) + OUTLIER_COST / self.weight)
+        return min(narrow, self.wide.cost(pose) + self.outlier_cost / self.weight)
 
     def objective(self, match: _Match) -> float:
         return match.score - self.weight * self.cost(match.pose)
@@ -336,13 +340,20 @@ class LaserOdometry:
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
         kinematic = _Prior(se2_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
                            opts.prior_weight)
-        if "odom" not in guesses:
+        if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
             return kinematic
+        if "odom" not in guesses:
+            # A robot mostly keeps its speed: constant velocity as a narrow prior, with what the robot can do
+            # (accelerate, stop, start turning) as the rarer alternative.
+            sd_xy = CV_STEADY_M + CV_STEADY_RATIO * float(np.hypot(motion[0], motion[1]))
+            sd_theta = CV_STEADY_RAD + CV_STEADY_RATIO * abs(float(motion[2]))
+            return _Prior(kinematic.mean, np.minimum(np.array([sd_xy, sd_xy, sd_theta]), kinematic.sd),
+                          opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity")
         motion = se2_between(last_pose, guesses["odom"])
         sd_xy = ODOM_NOISE_M + ODOM_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))
         return _Prior(se2_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
-                      wide=kinematic)
+                      wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
     def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
         """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
@@ -381,7 +392,7 @@ class LaserOdometry:
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
         step = se2_between(last.pose, pose)
-        if prior.wide is not None and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
+        if prior.kind == "odometry" and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
             self.counts[ODOM_REJECTED] += 1
         if np.hypot(step[0], step[1]) > 2.0 * self.options.max_speed_mps * dt + 0.1:
             self.counts[TOO_FAST] += 1
