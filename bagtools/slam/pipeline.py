@@ -36,7 +36,7 @@ from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid
 from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.gridmap.options import MAX_RESOLUTION, MIN_RESOLUTION
-from bagtools.io import LASERSCAN_TYPES, open_bag, read_tf_arrays
+from bagtools.io import LASERSCAN_TYPES, decode_laserscan, open_bag, read_tf_arrays
 from bagtools.ndtodom.steps import FrontEndRun
 from bagtools.simtruth import read_ground_truth
 from bagtools.slam.backend import BackEndOptions, BackEndResult, build_pose_graph
@@ -147,6 +147,8 @@ class SlamPipeline:
         self.front_end = front_end or laser_odometry
         self.warnings: list[str] = []
         self.timing_s: dict[str, float] = {}
+        self.base_frame = ""
+        self.tf = TfBuffer()
 
     def run(self) -> SlamResult:
         t0 = time.perf_counter()
@@ -170,10 +172,16 @@ class SlamPipeline:
     # -- steps -------------------------------------------------------------------------------
 
     def _check_bag(self) -> None:
+        """Refuse a bag without the scan topic; find the robot base frame and the tf (for the map and the truth)."""
         with open_bag(self.bag_path) as bag:
             require_topic(bag, self.options.topic, LASERSCAN_TYPES, "LaserScan")
-            if bag.topics[self.options.topic].count == 0:
+            first = next(bag.messages([self.options.topic]), None)
+            if first is None:
                 raise BagtoolsError(f"topic {self.options.topic} holds no scans", self.bag_path)
+            dynamic, static = read_tf_arrays(bag)
+            self.tf = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
+            scan_frame = decode_laserscan(first.msg).frame_id.lstrip("/")
+            self.base_frame = guess_base_frame(bag, set(self.tf.frames)) or scan_frame
 
     def _front_end(self) -> FrontEndRun:
         front = self.front_end(self.bag_path, self.options)
@@ -210,7 +218,7 @@ class SlamPipeline:
     def _map(self, trajectory: Trajectory) -> tuple[OccupancyGrid, dict]:
         o = self.options
         options = GridMapOptions(topic=o.topic, frame=SLAM_FRAME, poses="slam trajectory", resolution=1.0 / o.resolution_m,
-                                 max_range_m=o.max_range_m)
+                                 max_range_m=o.max_range_m, base_frame=self.base_frame)
         result = GridMapPipeline(self.bag_path, options, trajectory=trajectory).run()
         self.warnings.extend(w for w in result.summary.get("warnings", []) if w not in self.warnings)
         summary = {k: v for k, v in result.summary.items() if k not in ("options", "warnings", "bag", "poses")}
@@ -222,11 +230,8 @@ class SlamPipeline:
             truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 return None, {}
-            stamps_gt, T_map_gt, gt_frame = truth
-            gt_frame = gt_frame.lstrip("/")
-            dynamic, static = read_tf_arrays(bag)
-            buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
-            base = guess_base_frame(bag, set(buffer.frames)) or gt_frame
+        stamps_gt, T_map_gt, gt_frame = truth
+        gt_frame, base, buffer = gt_frame.lstrip("/"), self.base_frame, self.tf
         if gt_frame == base:
             T_gt_base = np.eye(4)
         elif buffer.can_transform(gt_frame, base):
