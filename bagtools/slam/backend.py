@@ -101,6 +101,7 @@ class _Builder:
         self.warnings: list[str] = []
         self._loops_since_optimization = 0
         self._last_optimization = 0
+        self._edges: list[tuple[int, int, float]] = []  # (i, j, weight) of every constraint, for the graph distances
 
     def run(self) -> BackEndResult:
         for node, step in enumerate(self.keyframe_steps):
@@ -158,18 +159,28 @@ class _Builder:
 
     # -- loops ---------------------------------------------------------------------------------
 
+    def _edge_weight(self, c: Constraint) -> float:
+        o = self.options.loop
+        if c.kind == LOOP:
+            return o.loop_edge_m
+        # a zero weight would read as no edge
+        return max(float(np.hypot(c.T_i_j[0], c.T_i_j[1]) + o.turn_m_per_rad * abs(c.T_i_j[2])), 1e-6)
+
     def _graph_distance(self, node: int) -> np.ndarray:
         """Graph distance (m) from ``node`` to every node (see the module docstring)."""
-        o = self.options.loop
         cons = self.graph.constraints
-        i = np.array([c.i for c in cons])
-        j = np.array([c.j for c in cons])
-        T = np.array([c.T_i_j for c in cons]).reshape(-1, 3)
-        w = np.where([c.kind == LOOP for c in cons], o.loop_edge_m,
-                     np.hypot(T[:, 0], T[:, 1]) + o.turn_m_per_rad * np.abs(T[:, 2]))
+        for c in cons[len(self._edges):]:
+            self._edges.append((c.i, c.j, self._edge_weight(c)))
         n = self.graph.n_nodes
-        w = np.maximum(w, 1e-6)  # a zero weight would read as no edge
-        adjacency = csr_matrix((w, (i, j)), shape=(n, n))
+        if not self._edges:
+            return np.where(np.arange(n) == node, 0.0, np.inf)
+        edges = np.array(self._edges).reshape(-1, 3)
+        i, j = np.minimum(edges[:, 0], edges[:, 1]).astype(np.int64), np.maximum(edges[:, 0], edges[:, 1]).astype(np.int64)
+        # of parallel edges the lightest (a sparse matrix would add them up)
+        order = np.lexsort((edges[:, 2], j, i))
+        first = np.r_[True, (np.diff(i[order]) != 0) | (np.diff(j[order]) != 0)]
+        keep = order[first]
+        adjacency = csr_matrix((edges[keep, 2], (i[keep], j[keep])), shape=(n, n))
         return dijkstra(adjacency, directed=False, indices=node)
 
     def _close_loops(self, node: int) -> None:
@@ -205,6 +216,7 @@ class _Builder:
                 break
             worst = self.graph.constraints[loops[int(np.argmax(chi2))]]
             self.graph.remove([loops[int(np.argmax(chi2))]])
+            self._edges = []  # the graph distances are rebuilt from the remaining constraints
             for cand in self.check.accepted:
                 if cand.old == worst.i and cand.new == worst.j and cand.status == ACCEPTED:
                     cand.status = OUTLIER
