@@ -13,7 +13,8 @@ system would:
 3. the graph is optimized (GTSAM Levenberg-Marquardt) when a loop corrects the
    estimate by more than ``correction_m``/``correction_rad``, or
    ``optimize_every`` keyframes after a smaller one; afterwards each loop's
-   squared Mahalanobis residual is checked against ``outlier_chi2``, and the
+   squared Mahalanobis residual is checked against ``outlier_chi2`` (scaled by
+   the loops' median residual, see :meth:`_Builder.outlier_gate`), and the
    worst loop above it is dropped and the graph optimized again, until none is.
    Later searches use the corrected estimate.
 
@@ -44,8 +45,9 @@ from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 #: Covariance of the motion between two keyframes the front end did not link (m^2, m^2, rad^2): unknown.
 UNLINKED_COVARIANCE = np.diag([1.0, 1.0, 0.3])
-#: chi2 of 3 degrees of freedom at 99.9 %.
+#: chi2 of 3 degrees of freedom at 99.9 %, and its median.
 CHI2_3DOF_999 = 16.27
+CHI2_3DOF_MEDIAN = 2.366
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class BackEndOptions:
     correction_rad: float = 0.02
     optimize_every: int = 10
     max_outlier_rounds: int = 20
+    min_loops_for_scale: int = 10
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.outlier_chi2) and self.outlier_chi2 > 0):
@@ -207,12 +210,26 @@ class _Builder:
         if np.hypot(residual[0], residual[1]) > self.options.correction_m or abs(residual[2]) > self.options.correction_rad:
             self.counts["large corrections"] += 1
 
+    def outlier_gate(self, chi2: np.ndarray) -> float:
+        """The chi2 above which a loop is an outlier: ``outlier_chi2``, scaled up by the loops' own spread.
+
+        The matchers' covariances share an unknown scale (a scan's points are not
+        independent, so the Hessians are too sure). The median of the loops' chi2
+        over the median of a chi2 of 3 degrees of freedom (2.366) estimates that
+        scale robustly, as the MAD does for a standard deviation; with fewer than
+        ``min_loops_for_scale`` loops, or a scale below 1, the gate is as given.
+        """
+        scale = 1.0
+        if len(chi2) >= self.options.min_loops_for_scale:
+            scale = max(1.0, float(np.median(chi2)) / CHI2_3DOF_MEDIAN)
+        return self.options.outlier_chi2 * scale
+
     def _optimize(self, node: int) -> None:
         """Optimize; then drop the worst loop above the chi2 gate and optimize again, until none is."""
         self.optimizations.append(self.graph.optimize())
         for _ in range(self.options.max_outlier_rounds):
             loops, chi2 = self.graph.loop_chi2()
-            if not loops or chi2.max() <= self.options.outlier_chi2:
+            if not loops or chi2.max() <= self.outlier_gate(chi2):
                 break
             worst = self.graph.constraints[loops[int(np.argmax(chi2))]]
             self.graph.remove([loops[int(np.argmax(chi2))]])

@@ -73,7 +73,7 @@ class LoopOptions:
     """
 
     search_radius_m: float = 5.0
-    min_travel_m: float = 5.0
+    min_travel_m: float = 8.0
     drift_per_m: float = 0.03
     drift_rad_per_m: float = 0.01
     loop_edge_m: float = 1.0
@@ -86,8 +86,8 @@ class LoopOptions:
     max_range_m: float = 20.0
     max_points: int = 1500
     min_score: float = 0.5
-    old_map_keyframes: int = 2
-    new_map_keyframes: int = 3
+    old_map_keyframes: int = 3
+    new_map_keyframes: int = 4
     max_candidates: int = 2
     loop_spacing_m: float = 1.0
     sure_sigma_m: float = 0.3
@@ -229,7 +229,9 @@ class LoopClosureSearch:
         """
         o = self.options
         path = np.asarray(self.path_m)
-        old = np.flatnonzero(path[new] - path[:new] >= o.min_travel_m)
+        # far enough back along the path, and the two local maps share no keyframe (else the match repeats the chain)
+        last = new - o.new_map_keyframes - o.old_map_keyframes - 1
+        old = np.flatnonzero(path[new] - path[: max(last, 0)] >= o.min_travel_m)
         if old.size == 0:
             return []
         dist = np.hypot(*(poses[old, :2] - poses[new, :2]).T)

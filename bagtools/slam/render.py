@@ -12,14 +12,14 @@ from bagtools.grid import OccupancyGrid
 MARGIN_M = 2.0
 
 
-def _view(grid: OccupancyGrid, trajectory_xy: np.ndarray) -> tuple[float, float, float, float]:
+def _view(grid: OccupancyGrid, probability: np.ndarray, trajectory_xy: np.ndarray) -> tuple[float, float, float, float]:
     """World limits (x0, x1, y0, y1) of the picture: the occupied cells and the trajectory, plus a margin.
 
     Far free space seen through windows or down long corridors stays out of view.
     """
     x0, x1 = grid.x_world_limits
     y0, y1 = grid.y_world_limits
-    occupied = np.argwhere(grid.occupancy_matrix("ternary") == 1)
+    occupied = np.argwhere(probability > grid.occupied_threshold)
     pts = [trajectory_xy[np.isfinite(trajectory_xy).all(axis=1)]]
     if occupied.size:
         pts.append(grid.grid2world(occupied))
@@ -39,17 +39,23 @@ def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_seg
     from matplotlib.figure import Figure
 
     traj = np.asarray(trajectory_xy, dtype=np.float64).reshape(-1, 2)
-    x0, x1, y0, y1 = _view(grid, traj)
+    probability = grid.occupancy_matrix("probability")
+    x0, x1, y0, y1 = _view(grid, probability, traj)
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     dpi = 100
     width_in = width_px / dpi
     fig = Figure(figsize=(width_in, min(max(width_in * aspect, 4.0), 2.0 * width_in) + 0.8), dpi=dpi)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-    gx0, gx1 = grid.x_world_limits
-    gy0, gy1 = grid.y_world_limits
-    ax.imshow(grid.occupancy_matrix("probability"), cmap="gray_r", vmin=0.0, vmax=1.0, origin="upper",
-              extent=(gx0, gx1, gy0, gy1), interpolation="nearest")
+    # Only the cells in view, as grey RGB bytes (no colour mapping of millions of cells by matplotlib).
+    (r0, c0), (r1, c1) = grid.world2grid(np.array([[x0, y1], [x1, y0]]))
+    r0, c0 = max(int(r0), 0), max(int(c0), 0)
+    r1, c1 = min(int(r1), grid.grid_size[0] - 1), min(int(c1), grid.grid_size[1] - 1)
+    grey = np.rint(255.0 * (1.0 - probability[r0:r1 + 1, c0:c1 + 1])).astype(np.uint8)
+    (left, top), (right, bottom) = grid.grid2world(np.array([[r0, c0], [r1, c1]]))
+    half = 0.5 * grid.cell_size_m
+    ax.imshow(np.repeat(grey[:, :, None], 3, axis=2), origin="upper", interpolation="nearest",
+              extent=(left - half, right + half, bottom - half, top + half))
     segments = np.asarray(loop_segments, dtype=np.float64).reshape(-1, 2, 2)
     if len(segments):
         ax.add_collection(LineCollection(segments, colors="tab:green", linewidths=0.8, alpha=0.8,
@@ -65,7 +71,7 @@ def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_seg
     ax.set_ylabel("y [m]")
     ax.set_title(title or f"SLAM map, {grid.cell_size_m:g} m/cell")
     ax.legend(loc="upper right", fontsize="small")
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.05, top=0.95)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()
