@@ -108,9 +108,9 @@ class _Builder:
 
     def run(self) -> BackEndResult:
         for node, step in enumerate(self.keyframe_steps):
-            motion = self._add_node(node, int(step))
+            motion, covariance = self._add_node(node, int(step))
             if self.search is not None:
-                self.search.add_keyframe(self.steps[int(step)].points_base, motion)
+                self.search.add_keyframe(self.steps[int(step)].points_base, motion, covariance)
                 self._close_loops(node)
         if self.check is not None:
             self.check.flush()
@@ -126,10 +126,11 @@ class _Builder:
 
     # -- nodes and odometry edges --------------------------------------------------------------
 
-    def _add_node(self, node: int, step: int) -> np.ndarray | None:
-        """Add keyframe ``node`` with its odometry edge; returns its motion from the node before (None for the first)."""
+    def _add_node(self, node: int, step: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Add keyframe ``node`` with its odometry edge; returns its motion from the node before and the edge's
+        covariance (None, None for the first)."""
         if node == 0:
-            return None
+            return None, None
         s = self.steps[step]
         ref = self.node_of.get(int(s.reference))
         if ref is None or s.reference < 0:
@@ -145,8 +146,8 @@ class _Builder:
         self.graph.add_node(pose)
         self.graph.add(Constraint(ref, node, T, cov, ODOMETRY))
         if ref == node - 1:
-            return T
-        return se2_between(self.graph.poses[node - 1], pose)
+            return T, cov
+        return se2_between(self.graph.poses[node - 1], pose), cov
 
     def _odometry_covariance(self, covariance: np.ndarray) -> np.ndarray:
         try:

@@ -25,9 +25,12 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    ``min_window_m``/``min_window_rad``, at most the search radius and a full
    turn); NDT (``ndt_cell_m`` cells, widened model) refines the best pose and
    must stay within ``max_refine_m``/``max_refine_rad`` of it.
-3. **Covariance**: the correlative covariance of the best pose (Olson's,
-   likelihood-weighted spread around it, at least the discretization's) plus
-   the inverse NDT Hessian (large along a corridor, where the match is weak).
+3. **Covariance** (:func:`loop_covariance`): the ambiguity of the correlative
+   search (Olson's likelihood-weighted spread around the best pose), the
+   inverse NDT Hessian (large along a corridor, where the match is weak), the
+   laser odometry's floor, and the uncertainty of the two local maps, which the
+   odometry chain assembled (its edges' covariances propagated to each map's
+   centre keyframe).
 4. **Acceptance** (:class:`ConsistencyCheck`): a score of at least
    ``min_score``; and the match must agree with the current estimate within
    the gate. When the estimate is sure of the relative pose (``sigma_t`` at
@@ -161,6 +164,29 @@ def voxel_subsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
 COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
 
 
+def _compose_with_covariance(a: np.ndarray, a_cov: np.ndarray, b: np.ndarray,
+                             b_cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """a then b ([x, y, theta]) and the covariance of the result (first order, a and b independent)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    J_a = np.array([[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]])
+    J_b = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return se2_compose(a, b), J_a @ a_cov @ J_a.T + J_b @ b_cov @ J_b.T
+
+
+def _inverse_with_covariance(m: np.ndarray, m_cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of the motion m ([x, y, theta]) and its covariance (first order)."""
+    c, s = math.cos(m[2]), math.sin(m[2])
+    J = np.array([[-c, -s, s * m[0] - c * m[1]], [s, -c, c * m[0] + s * m[1]], [0.0, 0.0, -1.0]])
+    inverse = np.array([-(c * m[0] + s * m[1]), s * m[0] - c * m[1], -m[2]])
+    return inverse, J @ m_cov @ J.T
+
+
+def _adjoint(T: np.ndarray) -> np.ndarray:
+    """SE(2) adjoint of T = [x, y, theta]: maps a perturbation on the left of T to one on its right, inverted."""
+    c, s = math.cos(T[2]), math.sin(T[2])
+    return np.array([[c, -s, T[1]], [s, c, -T[0]], [0.0, 0.0, 1.0]])
+
+
 def ndt_information_inverse(hessian: np.ndarray) -> np.ndarray:
     """Inverse of an NDT Hessian (3,3) on its positive eigenvalues; a direction without curvature gets 1e2."""
     values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
@@ -168,25 +194,32 @@ def ndt_information_inverse(hessian: np.ndarray) -> np.ndarray:
     return (vectors * inverse) @ vectors.T
 
 
-def loop_covariance(grid: GridMatchResult, ndt_hessian: np.ndarray) -> np.ndarray:
-    """Covariance (3,3) of a loop match refined by NDT (m^2, m rad, rad^2).
+def loop_covariance(grid: GridMatchResult, ndt_hessian: np.ndarray, T_old_new: np.ndarray,
+                    old_map_covariance: np.ndarray, new_map_covariance: np.ndarray) -> np.ndarray:
+    """Covariance (3,3) of a loop match ``T_old_new`` refined by NDT (m^2, m rad, rad^2; new keyframe's frame).
 
     The sum of: the spread of the likelihood among the correlative candidates
     around the best (Olson's covariance without its discretization term
     step^2 / 12, which the NDT refinement removes): large where the match is
-    ambiguous; the inverse NDT Hessian (the refinement's own precision); and
-    :data:`COVARIANCE_FLOOR`, the laser odometry's floor for its edges.
+    ambiguous; the inverse NDT Hessian (the refinement's own precision);
+    :data:`COVARIANCE_FLOOR`, the laser odometry's floor for its edges; and the
+    uncertainty of the two local maps, assembled from keyframes placed by the
+    odometry chain (:meth:`LoopClosureSearch.map_covariance`; the old map's
+    moved into the new keyframe's frame).
     """
     discretization = np.diag([grid.resolution_m**2, grid.resolution_m**2, grid.angular_resolution_rad**2]) / 12.0
     values, vectors = np.linalg.eigh(grid.covariance - discretization)
     spread = (vectors * np.maximum(values, 0.0)) @ vectors.T
-    return spread + ndt_information_inverse(ndt_hessian) + COVARIANCE_FLOOR
+    back = np.linalg.inv(_adjoint(T_old_new))
+    return (spread + ndt_information_inverse(ndt_hessian) + COVARIANCE_FLOOR + back @ old_map_covariance @ back.T
+            + new_map_covariance)
 
 
 @dataclass
 class _OldMap:
     correlative: CorrelativeReference
     ndt: NdtReference
+    covariance: np.ndarray  # of the map's assembly, see LoopClosureSearch.map_covariance
 
 
 class LoopClosureSearch:
@@ -200,16 +233,40 @@ class LoopClosureSearch:
         self.options = options or LoopOptions()
         self.points: list[np.ndarray] = []  # per keyframe: returns within max_range_m, base frame
         self.path_m: list[float] = []  # per keyframe: distance along the path from the first, metres
+        self.motions: list[np.ndarray] = []  # per keyframe: [x, y, theta] from the previous keyframe
+        self.motion_covariances: list[np.ndarray] = []  # and its covariance
         self._cache: OrderedDict[int, _OldMap] = OrderedDict()
 
-    def add_keyframe(self, points_base: np.ndarray, motion: np.ndarray | None) -> None:
-        """Record keyframe ``len(self.points)``: its points (N,2) in its base frame and its motion from the previous."""
+    def add_keyframe(self, points_base: np.ndarray, motion: np.ndarray | None,
+                     motion_covariance: np.ndarray | None = None) -> None:
+        """Record keyframe ``len(self.points)``: its points (N,2) in its base frame, and its motion [x, y, theta]
+        from the previous keyframe with that motion's covariance (None for the first keyframe)."""
         pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
         pts = pts[np.isfinite(pts).all(axis=1)]
         pts = pts[np.einsum("ij,ij->i", pts, pts) <= self.options.max_range_m**2]
         self.points.append(pts)
+        self.motions.append(np.zeros(3) if motion is None else np.asarray(motion, dtype=np.float64))
+        self.motion_covariances.append(np.zeros((3, 3)) if motion_covariance is None
+                                       else np.asarray(motion_covariance, dtype=np.float64))
         step = 0.0 if motion is None else float(np.hypot(motion[0], motion[1]))
         self.path_m.append((self.path_m[-1] if self.path_m else 0.0) + step)
+
+    def map_covariance(self, centre: int, keyframes: range) -> np.ndarray:
+        """How uncertain a local map is (3,3, centre keyframe's frame): the mean over its keyframes of the
+        covariance of their pose relative to ``centre``, propagated along the chain of motions (first order)."""
+        total = np.zeros((3, 3))
+        for direction in (1, -1):
+            pose, cov = np.zeros(3), np.zeros((3, 3))
+            k = centre
+            while (k + direction) in keyframes:
+                if direction == 1:
+                    m, m_cov = self.motions[k + 1], self.motion_covariances[k + 1]
+                else:  # the motion from k to k - 1 is the inverse of keyframe k's
+                    m, m_cov = _inverse_with_covariance(self.motions[k], self.motion_covariances[k])
+                pose, cov = _compose_with_covariance(pose, cov, m, m_cov)
+                total += cov
+                k += direction
+        return total / max(len(keyframes), 1)
 
     # -- candidates ------------------------------------------------------------------------------
 
@@ -265,18 +322,27 @@ class LoopClosureSearch:
             self._cache.move_to_end(old)
             return cached
         o = self.options
-        lo, hi = max(0, old - o.old_map_keyframes), min(len(self.points), old + o.old_map_keyframes + 1)
-        points = self._moved(range(lo, hi), poses, poses[old])
+        keyframes = self._old_range(old)
+        points = self._moved(keyframes, poses, poses[old])
         built = _OldMap(CorrelativeReference.from_points(points, o.resolution_m),
-                        NdtReference.from_points(points, o.ndt_cell_m, "widened"))
+                        NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes))
         self._cache[old] = built
         if len(self._cache) > o.cache_size:
             self._cache.popitem(last=False)
         return built
 
+    def _old_range(self, old: int) -> range:
+        """The keyframes of the old map around ``old``."""
+        k = self.options.old_map_keyframes
+        return range(max(0, old - k), min(len(self.points), old + k + 1))
+
+    def _new_range(self, new: int) -> range:
+        """The keyframes of the new map: ``new`` and the ones before it."""
+        return range(max(0, new - self.options.new_map_keyframes), new + 1)
+
     def _new_map(self, new: int, poses: np.ndarray) -> np.ndarray:
         o = self.options
-        points = self._moved(range(max(0, new - o.new_map_keyframes), new + 1), poses, poses[new])
+        points = self._moved(self._new_range(new), poses, poses[new])
         voxel = o.resolution_m
         thinned = voxel_subsample(points, voxel)
         while len(thinned) > o.max_points:
@@ -319,7 +385,8 @@ class LoopClosureSearch:
             cand.status = REFINE_FAILED
         else:
             cand.T_old_new = ndt.pose
-            cand.covariance = loop_covariance(grid, ndt.hessian)
+            cand.covariance = loop_covariance(grid, ndt.hessian, ndt.pose, old_map.covariance,
+                                              self.map_covariance(new, self._new_range(new)))
         cand.time_s = time.perf_counter() - t0
         return cand
 

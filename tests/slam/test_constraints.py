@@ -109,3 +109,23 @@ def test_consistency_check() -> None:
 def test_bad_loop_options(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         LoopOptions(**{field: value})
+
+
+def test_map_covariance_matches_a_monte_carlo_of_the_chain() -> None:
+    rng = np.random.default_rng(4)
+    search = LoopClosureSearch()
+    motions = [None, np.array([0.5, 0.0, 0.2]), np.array([0.5, 0.1, -0.1]), np.array([0.4, 0.0, 0.3])]
+    cov = np.diag([1e-4, 4e-4, 1e-4])
+    for m in motions:
+        search.add_keyframe(np.zeros((0, 2)), m, None if m is None else cov)
+    predicted = search.map_covariance(1, range(0, 4))
+    samples = []
+    for _ in range(4000):
+        noisy = [m + rng.multivariate_normal(np.zeros(3), cov) for m in motions[1:]]
+        before = se2_between(noisy[0], np.zeros(3))  # keyframe 0 in keyframe 1's frame
+        after1 = noisy[1]
+        after2 = se2_compose(noisy[1], noisy[2])
+        samples.append([before, after1, after2])
+    samples = np.array(samples)  # (draws, keyframe, 3)
+    empirical = sum(np.cov(samples[:, k].T) for k in range(3)) / 4
+    assert np.allclose(predicted, empirical, rtol=0.15, atol=2e-6), (predicted, empirical)
