@@ -19,33 +19,50 @@ def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tu
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
 @click.option("--topic", default="/scan", show_default=True, help="LaserScan topic.")
-@click.option("--init", type=click.Choice(["odom", "constant-velocity", "zero"]), default=None,
-              help="Initial guess of each match  [default: odom when the bag has odometry, else constant-velocity]")
+@click.option("--init", type=click.Choice(["auto", "odom", "constant-velocity", "zero"]), default="auto",
+              show_default=True,
+              help="Guess NDT starts from first (auto: the odometry when the bag has it, else constant velocity); "
+                   "the others are tried too when they disagree.")
+@click.option("--no-search", "no_search", is_flag=True,
+              help="Never run the grid search, even when no guess can be trusted (faster, less robust).")
+@click.option("--no-odometry", "no_odometry", is_flag=True, help="Ignore the bag's wheel odometry.")
 @click.option("--reference", type=click.Choice(["previous", "keyframe"]), default="keyframe", show_default=True,
-              help="Match against the previous scan, or a keyframe replaced after 0.5 m, 20 deg or a falling score.")
-@click.option("--cell-size", type=float, default=0.5, show_default=True, help="NDT cell side [m].")
+              help="Match against the previous scan, or a keyframe submap replaced after 0.5 m, 20 deg or a falling "
+                   "score.")
+@click.option("--cell-size", type=float, default=1.0, show_default=True, help="NDT cell side [m].")
 @click.option("--cell-model", type=click.Choice(["widened", "paper"]), default="widened", show_default=True,
               help="NDT cell covariances: widened along walls (less drift) or as in Biber and Strasser's paper.")
 @click.option("--min-score", type=float, default=0.1, show_default=True,
-              help="Normalized NDT score in [0, 1] below which a match falls back to its initial guess.")
+              help="Normalized NDT score in [0, 1] below which a match falls back to its guess.")
+@click.option("--max-speed", type=float, default=1.5, show_default=True,
+              help="Fastest the robot moves [m/s]: bounds constant velocity and the search.")
+@click.option("--max-turn-rate", type=float, default=2.0, show_default=True, help="Fastest the robot turns [rad/s].")
 @click.option("--scan-frame-offset", callback=_offset, default=None, metavar="X,Y,YAW",
               help="Laser pose on the robot base [m, m, rad] when tf lacks (or has a wrong) base -> laser transform.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: str, cell_size: float, cell_model: str,
-             min_score: float, scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
+def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, reference: str,
+             cell_size: float, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,
+             scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
     """Laser odometry of BAG: match its scans in order by 2D NDT and chain the motions.
+
+    Each scan starts from the best guess (wheel odometry, constant velocity,
+    no motion); when no guess can be trusted (a poor score, guesses that
+    disagree, scans far apart, no odometry) a grid search over what the robot
+    can have done seeds NDT. Odometry the scans contradict is not followed, and
+    every such event is counted and warned about.
 
     Writes OUT/trajectory.tum (the robot base in the odometry frame, TUM format
     for evo), odometry.tum (wheel odometry at the scan stamps), ground_truth.tum
-    (simulated bags), trajectory.png, scan_map.png and summary.json (matches,
-    fallbacks, time per pair, and APE / RPE per metre of NDT and odometry
-    against the ground truth, equal to evo_ape / evo_rpe on the same files).
+    (bags with /ground_truth), trajectory.png, scan_map.png and summary.json
+    (matches, searches, fallbacks, rejected odometry, time per pair, and APE /
+    RPE per metre of NDT and odometry against the ground truth, equal to
+    evo_ape / evo_rpe on the same files).
 
     \b
     Example:
       bagtools ndt-odom out/sim --out out/ndt
       evo_ape tum out/ndt/ground_truth.tum out/ndt/trajectory.tum
-      bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --reference previous
+      bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --no-odometry
     """
     from bagtools.errors import BagtoolsError
     from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
@@ -53,8 +70,9 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: st
 
     check_outputs(out_dir, NDT_ODOM_FILES, force)  # fail before the work, not after it
 
-    options = NdtOdomOptions(topic=topic, init=init, reference=reference, cell_size_m=cell_size, cell_model=cell_model,
-                             min_score=min_score,
+    options = NdtOdomOptions(topic=topic, init=init, search=not no_search, use_odometry=not no_odometry,
+                             reference=reference, cell_size_m=cell_size, cell_model=cell_model, min_score=min_score,
+                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate,
                              scan_frame_offset=scan_frame_offset)
     result = NdtOdomPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
@@ -63,8 +81,9 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str | None, reference: st
         raise BagtoolsError(result.problem, bag)
     written = write_ndt_odom(result, out_dir, force)
     s = result.summary
-    click.echo(f"{s['scans_used']} scans, {s['pairs_matched']} pairs matched, {s['fallbacks']} fell back to the guess "
-               f"({s['init']} init, {s['reference']} reference); wrote {', '.join(p.name for p in written)} in {out_dir}")
+    click.echo(f"{s['scans_used']} scans: {s['pairs_matched']} pairs matched ({s['searched']} needed a search), "
+               f"{s['fallbacks']} fell back to their guess, {s['odometry_rejected']} odometry steps rejected; "
+               f"wrote {', '.join(p.name for p in written)} in {out_dir}")
     for name, label in (("errors_ndt", "NDT"), ("errors_odometry", "odometry")):
         ape = s.get(name, {}).get("ape_translation_m", {})
         rpe = s.get(name, {}).get("rpe_translation_m_per_1m", {})

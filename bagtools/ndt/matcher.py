@@ -168,6 +168,7 @@ def match_scans(
     max_iterations: int = 400,
     score_tolerance: float = 1e-6,
     cell_model: str = "paper",
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> NdtResult:
     """Pose of the ``current`` scan in the ``reference`` scan's frame by 2D NDT.
 
@@ -184,6 +185,12 @@ def match_scans(
         cell_model: "paper" (Biber and Strasser's cell covariances, as MATLAB)
             or "widened" (less biased and more accurate on LDS-like scans; see
             :mod:`bagtools.ndt.grid`). Ignored when ``reference`` is prebuilt.
+        prior: optional (mean (3,), information (3,3)) of a Gaussian prior on
+            the pose (e.g. from wheel odometry): the iteration then maximizes
+            score - 0.5 d^T information d, d = pose - mean (theta wrapped), a
+            MAP estimate that stays put where the scans cannot tell poses apart
+            (along a corridor). ``score`` and ``hessian`` of the result are the
+            NDT ones, without the prior.
 
     Returns:
         An :class:`NdtResult`. Degenerate input (fewer than 5 finite points in
@@ -212,14 +219,32 @@ def match_scans(
         return _failure(pose0, f"too few valid points in the reference scan ({ref.n_points} < {MIN_SCAN_POINTS})", n)
     if ref.n_cells == 0:
         return _failure(pose0, "no reference cell holds 3 distinct points (scan too sparse for the cell size)", n)
-    return _newton(ref, np.ascontiguousarray(cur.T), pose0, max_iterations, score_tolerance)
+    if prior is not None:
+        mean, info = np.asarray(prior[0], dtype=np.float64).reshape(3), np.asarray(prior[1], dtype=np.float64)
+        if info.shape != (3, 3) or not (np.isfinite(mean).all() and np.isfinite(info).all()):
+            raise ValueError("prior must be (mean (3,), information (3,3)) of finite numbers")
+        prior = (mean, 0.5 * (info + info.T))
+    return _newton(ref, np.ascontiguousarray(cur.T), pose0, max_iterations, score_tolerance, prior)
+
+
+def _objective(ref: NdtReference, points: np.ndarray, pose: np.ndarray,
+               prior: tuple[np.ndarray, np.ndarray] | None) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """(objective, NDT score, gradient, Hessian of -objective): the score less the prior's penalty, if any."""
+    score, grad, hess = _evaluate(ref, points, pose, True)
+    if prior is None:
+        return score, score, grad, hess
+    mean, info = prior
+    d = pose - mean
+    d[2] = (d[2] + np.pi) % (2 * np.pi) - np.pi
+    info_d = info @ d
+    return score - 0.5 * float(d @ info_d), score, grad + info_d, hess + info
 
 
 def _newton(ref: NdtReference, points: np.ndarray, pose: np.ndarray, max_iterations: int,
-            score_tolerance: float) -> NdtResult:
-    """Trust-region Newton iterations on the cost -score, in x, y and lever * theta (all metres)."""
+            score_tolerance: float, prior: tuple[np.ndarray, np.ndarray] | None = None) -> NdtResult:
+    """Trust-region Newton iterations on the cost -objective, in x, y and lever * theta (all metres)."""
     n = points.shape[1]
-    score, grad, hess = _evaluate(ref, points, pose, True)
+    objective, score, grad, hess = _objective(ref, points, pose, prior)
     initial_score = score
     if score == 0.0:
         return _failure(pose, "no current point falls near the reference scan at the initial pose", n)
@@ -244,8 +269,8 @@ def _newton(ref: NdtReference, points: np.ndarray, pose: np.ndarray, max_iterati
             iterations -= 1
             break
         trial = pose + step / scale
-        t_score, t_grad, t_hess = _evaluate(ref, points, trial, True)
-        gain = t_score - score
+        t_objective, t_score, t_grad, t_hess = _objective(ref, points, trial, prior)
+        gain = t_objective - objective
         ratio = gain / predicted if predicted > 0 else -1.0
         step_norm = float(np.linalg.norm(step))
         if ratio < 0.25:
@@ -253,7 +278,7 @@ def _newton(ref: NdtReference, points: np.ndarray, pose: np.ndarray, max_iterati
         elif ratio > 0.75 and on_boundary:
             radius = min(2.0 * radius, 2.0 * ref.cell_size)
         if gain > 0:
-            pose, score, grad, hess = trial, t_score, t_grad, t_hess
+            pose, objective, score, grad, hess = trial, t_objective, t_score, t_grad, t_hess
             if gain < score_tolerance:
                 converged, reason = True, "score change below score_tolerance"
                 break
@@ -262,6 +287,8 @@ def _newton(ref: NdtReference, points: np.ndarray, pose: np.ndarray, max_iterati
             break
     pose = pose.copy()
     pose[2] = (pose[2] + np.pi) % (2 * np.pi) - np.pi
+    if prior is not None:
+        hess = hess - prior[1]
     return NdtResult(pose=pose, score=score, hessian=hess, iterations=iterations, converged=converged,
                      reason=reason, n_points=n, initial_score=initial_score)
 

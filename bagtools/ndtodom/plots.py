@@ -11,7 +11,7 @@ from bagtools.trajectory import Trajectory
 #: Side of the pixels of the scan map, metres.
 SCAN_MAP_CELL_M = 0.02
 #: Larger maps get coarser pixels so the image stays at most this many pixels wide.
-MAX_SCAN_MAP_PIXELS = 4000
+MAX_SCAN_MAP_PIXELS = 1600
 
 
 def _pyplot():

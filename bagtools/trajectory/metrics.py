@@ -154,3 +154,28 @@ def rpe_translation(ref: Trajectory, est: Trajectory, delta_m: float = 1.0,
     # translation of inv(Q) @ P = Q_R^T (P_t - Q_t)
     err = np.einsum("nki,nk->ni", Q[:, :3, :3], P[:, :3, 3] - Q[:, :3, 3])
     return ErrorStats.of(np.linalg.norm(err, axis=1))
+
+
+def rpe_frames(ref: Trajectory, est: Trajectory, delta: int = 1,
+               max_diff_ns: int = DEFAULT_MAX_DIFF_NS) -> tuple[np.ndarray, np.ndarray]:
+    """RPE over every pair of poses ``delta`` apart: errors (K,) in translation (m) and rotation angle (degrees).
+
+    As ``evo_rpe tum ref est --delta N --delta_unit f --all_pairs`` with ``-r
+    trans_part`` and ``-r angle_deg``: for each associated pair (i, i + delta)
+    the error is ``inv(inv(Q_i) Q_j) inv(P_i) P_j``. With delta 1 it is the
+    error of each step between consecutive scans. Raises BagtoolsError when
+    fewer than ``delta + 1`` poses associate.
+    """
+    if delta < 1:
+        raise ValueError(f"delta must be a positive number of poses, got {delta}")
+    ref_m, est_m = associate(ref, est, max_diff_ns)
+    n = len(est_m)
+    if n <= delta:
+        raise BagtoolsError(f"only {n} poses associate with the reference, fewer than {delta + 1}")
+    i = np.arange(n - delta)
+    Q = _relative(ref_m.poses, i, i + delta)
+    P = _relative(est_m.poses, i, i + delta)
+    R_err = np.einsum("nki,nkj->nij", Q[:, :3, :3], P[:, :3, :3])
+    t_err = np.einsum("nki,nk->ni", Q[:, :3, :3], P[:, :3, 3] - Q[:, :3, 3])
+    cos = np.clip((np.trace(R_err, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return np.linalg.norm(t_err, axis=1), np.degrees(np.arccos(cos))

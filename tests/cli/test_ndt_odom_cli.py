@@ -27,7 +27,7 @@ def test_simulated_bag_writes_everything_and_refuses_to_overwrite(tmp_path: Path
     out_dir = tmp_path / "ndt"
     done = _run("ndt-odom", str(FIXTURES / "sim_lap_cloud_20s"), "--out", str(out_dir))
     assert done.returncode == 0, done.stderr
-    assert "101 scans, 100 pairs matched" in done.stdout and "NDT: APE rmse" in done.stdout
+    assert "101 scans: 100 pairs matched" in done.stdout and "NDT: APE rmse" in done.stdout
     assert "odometry: APE rmse" in done.stdout
     names = sorted(p.name for p in out_dir.iterdir())
     assert names == ["ground_truth.tum", "odometry.tum", "scan_map.png", "summary.json", "trajectory.png", "trajectory.tum"]

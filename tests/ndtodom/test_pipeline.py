@@ -42,8 +42,9 @@ def test_lap_ndt_error_at_most_half_of_odometry(lap_run) -> None:
     summary, _ = lap_run
     ndt = summary["errors_ndt"]["ape_translation_m"]["rmse"]
     odom = summary["errors_odometry"]["ape_translation_m"]["rmse"]
-    assert summary["init"] == "odom" and summary["reference"] == "keyframe"
+    assert summary["init"] == "auto" and summary["odometry_used"] and summary["reference"] == "keyframe"
     assert summary["fallbacks"] == 0 and summary["pairs_matched"] == summary["scans_used"] - 1 == 300
+    assert summary["searched"] <= 3 and summary["odometry_rejected"] == 0 and summary["warnings"] == []
     assert ndt <= 0.5 * odom, (ndt, odom)
     assert summary["errors_ndt"]["rpe_translation_m_per_1m"]["rmse"] < 0.02
 
@@ -100,7 +101,7 @@ def test_180_degree_laser_without_odometry(tmp_path: Path, lap_truth) -> None:
     bag = scan_bag(tmp_path / "half", stamps[::6], T_map_base[::6], lidar)
     result = NdtOdomPipeline(bag, NdtOdomOptions()).run()
     s = result.summary
-    assert s["init"] == "constant-velocity" and s["odometry_source"] is None and result.odometry is None
+    assert s["init"] == "auto" and not s["odometry_used"] and s["odometry_source"] is None and result.odometry is None
     np.testing.assert_allclose(result.trajectory.poses[0], np.eye(4), atol=1e-12)
     assert s["base_frame"] == "base_scan" and s["scans_used"] == 101
     assert s["errors_ndt"]["ape_translation_m"]["rmse"] < 0.1
@@ -112,7 +113,7 @@ def test_180_degree_laser_without_odometry(tmp_path: Path, lap_truth) -> None:
 def test_real_turtlebot3_bag(real_dir: Path) -> None:
     result = NdtOdomPipeline(real_dir / "turtlebot3_real_lidar_odom.bag", NdtOdomOptions()).run()
     s = result.summary
-    assert s["scans_used"] == 291 and s["base_frame"] == "base_link" and s["init"] == "odom"
+    assert s["scans_used"] == 291 and s["base_frame"] == "base_link" and s["odometry_used"]
     assert any("no transform from base_link to base_scan in the bag; assuming the scan frame is the base frame" in w
                for w in s["warnings"])
     assert any("dropped 8 corrupt /tf samples odom -> base_link" in w for w in s["warnings"])
@@ -193,7 +194,7 @@ def test_poor_match_falls_back_to_the_odometry_guess(tmp_path: Path) -> None:
         msgs.append(("/scan", SCAN, t + 1, make_scan(t, ranges)))
     result = NdtOdomPipeline(write_bag(tmp_path / "poor", msgs), NdtOdomOptions(min_score=0.3)).run()
     s = result.summary
-    assert s["odometry_source"] == "/odom (odom -> base_link)" and s["init"] == "odom"
+    assert s["odometry_source"] == "/odom (odom -> base_link)" and s["odometry_used"]
     assert s["fallbacks"] >= 1 and s["pairs_matched"] + s["fallbacks"] == 3
     np.testing.assert_allclose(result.trajectory.positions[:, 0], [0.0, 0.1, 0.2, 0.3], atol=0.02)
 

@@ -1,0 +1,438 @@
+"""Laser odometry that holds on real recordings: guesses, gating, a search when a guess cannot be trusted.
+
+:class:`LaserOdometry` registers scans one at a time (the KISS-ICP way: the
+pipeline iterates a dataset and feeds one small algorithm object). For each
+scan, in the robot base frame:
+
+1. **Guesses** of its pose: the wheel odometry's motion since the previous scan
+   (when the bag has odometry), constant velocity (the last motion scaled to
+   the time step, never beyond what the robot can do in it: ``max_speed_mps``,
+   ``max_turn_rate_radps``), and no motion.
+2. **NDT** from the first guess (odometry if there is one) against the current
+   keyframe. The other guesses are tried too when they lie outside that
+   result's basin; results that disagree mean several minima.
+3. **Search** when a guess cannot be trusted: no good score, disagreeing
+   results, a long time gap, or no odometry and a motion larger than NDT's
+   basin. :func:`~bagtools.ndt.match_scans_grid` (correlative branch and bound)
+   searches a window around the best result that covers what the robot can
+   have done since the previous scan (or, with trusted odometry, what the
+   odometry's error can be), and NDT refines its result. The best normalized
+   NDT score wins.
+4. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
+   counted); an odometry motion the match contradicts beyond its noise is
+   counted as a rejected odometry sample; a step faster than the robot could
+   move is counted. :meth:`LaserOdometry.warnings` says each kind once, with
+   counts.
+5. **Keyframes**: a scan becomes the reference once the robot has moved
+   ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
+   or the score fell below ``keyframe_score_ratio`` of the keyframe's first.
+
+Poses are planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from bagtools.ndt import NdtReference, match_scans
+from bagtools.ndt.correlative import CorrelativeReference, match_scans_grid
+from bagtools.ndt.grid import CELL_MODELS
+from bagtools.ndtodom.steps import FrontEndRun, ScanStep
+from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
+
+GUESSES = ("odom", "constant-velocity", "zero")
+
+# Counter keys (summary.json) and their one-line explanations (warnings).
+SEARCHED = "searched"
+FALLBACK = "fallback"
+ODOM_REJECTED = "odometry_rejected"
+TOO_FAST = "faster_than_robot"
+
+
+#: Odometry's noise per step: a floor plus a share of the motion (sd, m and rad).
+ODOM_NOISE_M, ODOM_NOISE_RATIO = 0.05, 0.1
+ODOM_NOISE_RAD, ODOM_TURN_NOISE_RATIO = 0.05, 0.3
+#: Constant velocity's uncertainty: a floor, what acceleration can change in the step, and a share of the motion.
+CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO = 0.05, 0.03, 0.2
+#: A candidate's score loses this much per unit of squared Mahalanobis distance from the prior: where the
+#: scene cannot tell poses apart (a corridor), the prior decides; where it can, the score does.
+PRIOR_WEIGHT_DEFAULT = 0.01
+#: What overruling the odometry costs, in normalized score (see _Prior).
+OUTLIER_COST = 0.3
+#: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
+PRIOR_GATE2 = 14.0
+#: Keyframes of the submap lie within this distance of the newest one (m).
+SUBMAP_RADIUS_M = 10.0
+#: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
+SEARCH_SIGMAS = 3.0
+MAX_SEARCH_M = 3.0
+
+
+@dataclass(frozen=True)
+class FrontEndOptions:
+    """Settings of :class:`LaserOdometry` (defaults hold on the real logs and on simulated bags).
+
+    ``init``: which guess NDT starts from first ("auto": odometry when given,
+    else constant velocity). ``search``: allow the grid search. ``reference``:
+    "keyframe" or "previous" (every scan is a keyframe).
+    """
+
+    init: str = "auto"
+    search: bool = True
+    reference: str = "keyframe"
+    cell_size_m: float = 1.0
+    cell_model: str = "widened"
+    min_score: float = 0.1
+    trust_score_ratio: float = 0.75
+    keyframe_distance_m: float = 0.5
+    keyframe_angle_rad: float = 0.35
+    keyframe_score_ratio: float = 0.7
+    max_speed_mps: float = 1.5
+    max_turn_rate_radps: float = 2.0
+    max_accel_mps2: float = 1.0
+    max_turn_accel_radps2: float = 2.0
+    max_gap_s: float = 1.5
+    search_resolution_m: float = 0.1
+    search_angular_resolution_rad: float = 0.005
+    submap_keyframes: int = 5
+    prior_weight: float = PRIOR_WEIGHT_DEFAULT
+    voxel_m: float = 0.2
+    max_iterations: int = 100
+
+    def __post_init__(self) -> None:
+        if self.init not in ("auto", *GUESSES):
+            raise ValueError(f"init must be auto or one of {', '.join(GUESSES)}, got {self.init!r}")
+        if self.reference not in ("keyframe", "previous"):
+            raise ValueError(f"reference must be keyframe or previous, got {self.reference!r}")
+        if self.cell_model not in CELL_MODELS:
+            raise ValueError(f"cell_model must be one of {', '.join(CELL_MODELS)}, got {self.cell_model!r}")
+        for name in ("cell_size_m", "max_speed_mps", "max_turn_rate_radps", "max_accel_mps2", "max_turn_accel_radps2",
+                     "max_gap_s", "search_resolution_m", "search_angular_resolution_rad", "keyframe_distance_m",
+                     "keyframe_angle_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        if not 0.0 <= self.min_score <= 1.0 or not 0.0 <= self.trust_score_ratio <= 1.0:
+            raise ValueError("min_score and trust_score_ratio must be in [0, 1]")
+
+
+def normalized_score(score: float, n_points: int) -> float:
+    """NDT score / its maximum (4 grids x points): in [0, 1] whatever the beam count."""
+    return score / (4.0 * n_points) if n_points > 0 else 0.0
+
+
+#: The NDT Hessian's inverse is floored by this (m^2, m^2, rad^2): points are not independent.
+COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
+#: Guesses closer than this to a result (m, rad) lie in its basin: NDT from them would end there too.
+BASIN_M, BASIN_RAD = 0.15, 0.1
+#: Two results closer than this (m, rad) agree.
+AGREE_M, AGREE_RAD = 0.05, 0.02
+
+
+def ndt_covariance(hessian: np.ndarray) -> np.ndarray:
+    """Covariance (3,3) of an NDT match from the Hessian of its cost: the inverse on the positive
+    eigenvalues (a degenerate direction gets a large variance), plus :data:`COVARIANCE_FLOOR`."""
+    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
+    inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
+    return (vectors * inverse) @ vectors.T + COVARIANCE_FLOOR
+
+
+@dataclass
+class _Match:
+    pose: np.ndarray  # in the keyframe's base frame
+    score: float
+    covariance: np.ndarray
+    source: str
+
+
+@dataclass(frozen=True)
+class _Prior:
+    """The expected pose in the keyframe frame (3,) and its standard deviations (3,) (m, m, rad).
+
+    With ``wide`` (another prior: what the robot can have done), the prior is a
+    mixture: usually ``mean``/``sd``, rarely anything ``wide`` allows (wheel
+    odometry that slipped, or a corrupt sample). A candidate's cost is then the
+    cheaper of the two explanations, the wide one paying OUTLIER_COST (in
+    normalized score) for its rarity: the scans must be that much better
+    aligned to overrule the odometry.
+    """
+
+    mean: np.ndarray
+    sd: np.ndarray
+    weight: float = PRIOR_WEIGHT_DEFAULT
+    wide: _Prior | None = None
+
+    def mahalanobis2(self, pose: np.ndarray) -> float:
+        d = se2_between(self.mean, pose)
+        return float(np.sum((d / self.sd) ** 2))
+
+    def cost(self, pose: np.ndarray) -> float:
+        """-2 log of the prior density relative to its peak (squared Mahalanobis for one Gaussian)."""
+        narrow = self.mahalanobis2(pose)
+        if self.wide is None:
+            return narrow
+        return min(narrow, self.wide.cost(pose) + OUTLIER_COST / self.weight)
+
+    def objective(self, match: _Match) -> float:
+        return match.score - self.weight * self.cost(match.pose)
+
+    def component(self, pose: np.ndarray) -> _Prior:
+        """The Gaussian that explains ``pose`` (the narrow one, or the wide one when that is cheaper)."""
+        if self.wide is None or self.cost(pose) >= self.mahalanobis2(pose):
+            return self
+        return self.wide.component(pose)
+
+    def information(self, n_points: int) -> np.ndarray:
+        """This Gaussian as information on the raw NDT score of ``n_points`` points (see :func:`match_scans`)."""
+        return 8.0 * n_points * self.weight * np.diag(1.0 / self.sd**2)
+
+
+@dataclass
+class _Keyframe:
+    """The reference: a keyframe's pose, and the points of it and the keyframes before it (its submap) in its
+    base frame."""
+
+    index: int
+    pose: np.ndarray
+    points: np.ndarray
+    ndt: NdtReference
+    first_score: float | None = None
+    correlative: CorrelativeReference | None = None
+
+
+class LaserOdometry:
+    """Registers scans in order (see the module docstring); ``run`` collects the steps."""
+
+    def __init__(self, options: FrontEndOptions | None = None) -> None:
+        self.options = options or FrontEndOptions()
+        self.run = FrontEndRun()
+        self.counts: Counter[str] = Counter()
+        self._keyframe: _Keyframe | None = None
+        self._last_odom: np.ndarray | None = None
+        self._velocity = np.zeros(3)  # per second, in the base frame
+        self._scores: list[float] = []
+
+    # -- the loop body -------------------------------------------------------------------------
+
+    def register(self, stamp_ns: int, points_base: np.ndarray, odom_pose: np.ndarray | None = None) -> ScanStep:
+        """Add one scan: (N,2) valid returns in the base frame, and the odometry pose at its stamp if known."""
+        points_base = np.asarray(points_base, dtype=np.float64)
+        odom = None if odom_pose is None else np.asarray(odom_pose, dtype=np.float64)
+        sparse = _voxel_filter(points_base, self.options.voxel_m)
+        if not self.run.steps:
+            step = self._first(stamp_ns, points_base, odom)
+        else:
+            step = self._next(stamp_ns, sparse, points_base, odom)
+        self.run.steps.append(step)
+        if odom is not None:
+            self._last_odom = odom
+        return step
+
+    def _first(self, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> ScanStep:
+        pose = odom.copy() if odom is not None else np.zeros(3)
+        self._new_keyframe(0, pose, points)
+        return ScanStep(stamp_ns, pose, points, -1, np.zeros(3), COVARIANCE_FLOOR.copy(), 1.0, "first", True)
+
+    def _next(self, stamp_ns: int, points: np.ndarray, full: np.ndarray, odom: np.ndarray | None) -> ScanStep:
+        """Register a scan: ``points`` (voxel-filtered) are matched; ``full`` is kept and makes keyframes."""
+        opts = self.options
+        last = self.run.steps[-1]
+        dt = max((stamp_ns - last.stamp_ns) / 1e9, 1e-3)
+        guesses = self._guesses(last.pose, dt, odom)
+        kf = self._keyframe
+        prior = self._prior(last.pose, dt, guesses, kf)
+        matches = self._ndt_from_guesses(points, kf, guesses, prior)
+        best = max(matches, key=prior.objective)
+        if opts.search and self._needs_search(matches, best, dt, prior):
+            self.counts[SEARCHED] += 1
+            searched = self._search(points, kf, prior, dt)
+            if searched is not None:
+                matches.append(searched)
+                best = max(matches, key=prior.objective)
+            if best.score < self._trust_score() and prior.wide is not None:
+                # The odometry may be what is wrong: search what the robot can have done instead.
+                searched = self._search(points, kf, prior.wide, dt)
+                if searched is not None:
+                    matches.append(searched)
+                    best = max(matches, key=prior.objective)
+        if best.score < opts.min_score:
+            self.counts[FALLBACK] += 1
+            fallback = guesses.get("odom", guesses["constant-velocity"])
+            best = _Match(se2_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
+        pose = se2_compose(kf.pose, best.pose)
+        pose[2] = wrap_to_pi(pose[2])
+        self._check(last, pose, dt, prior, best)
+        if best.source != "fallback":
+            self._velocity = se2_between(last.pose, pose) / dt
+            self._scores.append(best.score)
+        keyframe = self._is_new_keyframe(best)
+        step = ScanStep(stamp_ns, pose, full, kf.index, best.pose, best.covariance, best.score, best.source, keyframe)
+        if keyframe:
+            self._new_keyframe(len(self.run.steps), pose, full)
+        return step
+
+    # -- steps of the loop body ----------------------------------------------------------------
+
+    def _guesses(self, last_pose: np.ndarray, dt: float, odom: np.ndarray | None) -> dict[str, np.ndarray]:
+        """Absolute pose guesses, the first one to try first."""
+        opts = self.options
+        cv = self._velocity * dt
+        cv[:2] *= min(1.0, opts.max_speed_mps * dt / max(float(np.hypot(cv[0], cv[1])), 1e-12))
+        cv[2] = float(np.clip(cv[2], -opts.max_turn_rate_radps * dt, opts.max_turn_rate_radps * dt))
+        guesses: dict[str, np.ndarray] = {}
+        if odom is not None and self._last_odom is not None and opts.init in ("auto", "odom"):
+            guesses["odom"] = se2_compose(last_pose, se2_between(self._last_odom, odom))
+        guesses["constant-velocity"] = se2_compose(last_pose, cv)
+        guesses["zero"] = last_pose.copy()
+        first = opts.init if opts.init in guesses else next(iter(guesses))
+        return {first: guesses[first]} | {k: v for k, v in guesses.items() if k != first}
+
+    def _ndt(self, points: np.ndarray, kf: _Keyframe, initial: np.ndarray, source: str, prior: _Prior) -> _Match:
+        """NDT from ``initial`` with the prior's component there as a MAP term (a corridor keeps the prior's position)."""
+        gaussian = prior.component(initial)
+        info = gaussian.information(len(points))
+        result = match_scans(points, kf.ndt, initial_pose=initial, max_iterations=self.options.max_iterations,
+                             prior=(gaussian.mean, info))
+        score = normalized_score(result.score, result.n_points) if result.score > 0 else 0.0
+        return _Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian + info), source)
+
+    def _ndt_from_guesses(self, points: np.ndarray, kf: _Keyframe, guesses: dict[str, np.ndarray],
+                          prior: _Prior) -> list[_Match]:
+        """NDT from the first guess, then from every other guess outside the basins of the results so far."""
+        matches: list[_Match] = []
+        for guess in guesses.values():
+            initial = se2_between(kf.pose, guess)
+            if any(_close(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
+                continue
+            matches.append(self._ndt(points, kf, initial, "ndt", prior))
+        return matches
+
+    def _prior(self, last_pose: np.ndarray, dt: float, guesses: dict[str, np.ndarray], kf: _Keyframe) -> _Prior:
+        """Where the scan should be before matching: the odometry's motion (its noise grows with the motion),
+        else constant velocity (its uncertainty grows with the time step: the robot may have changed its speed)."""
+        opts = self.options
+        motion = se2_between(last_pose, guesses["constant-velocity"])
+        sd_xy = CV_NOISE_M + 0.5 * opts.max_accel_mps2 * dt * dt + CV_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
+        sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
+        kinematic = _Prior(se2_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
+                           opts.prior_weight)
+        if "odom" not in guesses:
+            return kinematic
+        motion = se2_between(last_pose, guesses["odom"])
+        sd_xy = ODOM_NOISE_M + ODOM_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
+        sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))
+        return _Prior(se2_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
+                      wide=kinematic)
+
+    def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
+        """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
+        prior finds unlikely."""
+        if dt > self.options.max_gap_s:
+            return True
+        if prior.sd[0] > BASIN_M or prior.sd[2] > BASIN_RAD:  # the prior is wider than NDT's basin
+            return True
+        if best.score < self._trust_score():
+            return True
+        if prior.mahalanobis2(best.pose) > PRIOR_GATE2:
+            return True
+        rivals = [m for m in matches if m is not best and m.score > 0.8 * best.score]
+        return any(not _close(m.pose, best.pose, AGREE_M, AGREE_RAD) for m in rivals)
+
+    def _trust_score(self) -> float:
+        """A score to trust: a share of the recent typical score (the scene decides what is typical)."""
+        recent = self._scores[-20:]
+        typical = float(np.median(recent)) if recent else 0.0
+        return max(self.options.min_score, self.options.trust_score_ratio * typical)
+
+    def _search(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float) -> _Match | None:
+        """Grid search over the prior's 3-sigma window (within what the robot can do), then NDT."""
+        opts = self.options
+        half_xy = float(np.clip(SEARCH_SIGMAS * prior.sd[0], 0.2, min(opts.max_speed_mps * dt + 0.2, MAX_SEARCH_M)))
+        half_theta = float(np.clip(SEARCH_SIGMAS * prior.sd[2], 0.1, min(opts.max_turn_rate_radps * dt + 0.1, math.pi)))
+        if kf.correlative is None:
+            kf.correlative = CorrelativeReference.from_points(kf.points, resolution_m=opts.search_resolution_m)
+        grid = match_scans_grid(points, kf.correlative, initial_pose=prior.mean,
+                                search_range=(half_xy, half_xy, half_theta),
+                                angular_resolution_rad=opts.search_angular_resolution_rad)
+        if not grid.ok:
+            return None
+        return self._ndt(points, kf, np.asarray(grid.pose, dtype=np.float64), "search", prior)
+
+    def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
+        """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
+        step = se2_between(last.pose, pose)
+        if prior.wide is not None and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
+            self.counts[ODOM_REJECTED] += 1
+        if np.hypot(step[0], step[1]) > 2.0 * self.options.max_speed_mps * dt + 0.1:
+            self.counts[TOO_FAST] += 1
+
+    def _is_new_keyframe(self, match: _Match) -> bool:
+        opts = self.options
+        kf = self._keyframe
+        if opts.reference == "previous" or match.source == "fallback":
+            return True
+        if kf.first_score is None:
+            kf.first_score = match.score
+        return bool(np.hypot(match.pose[0], match.pose[1]) >= opts.keyframe_distance_m
+                    or abs(match.pose[2]) >= opts.keyframe_angle_rad
+                    or match.score < opts.keyframe_score_ratio * kf.first_score)
+
+    def _new_keyframe(self, index: int, pose: np.ndarray, points: np.ndarray) -> None:
+        """Make scan ``index`` the reference, with the last ``submap_keyframes`` keyframes' points moved into it."""
+        opts = self.options
+        parts = [points]
+        for k in reversed(self.run.keyframe_indexes[-(opts.submap_keyframes - 1):] if opts.submap_keyframes > 1 else []):
+            if k == index:
+                continue
+            older = self.run.steps[k]
+            rel = se2_between(pose, older.pose)
+            if np.hypot(rel[0], rel[1]) > SUBMAP_RADIUS_M:
+                break
+            c, s = np.cos(rel[2]), np.sin(rel[2])
+            parts.append(older.points_base @ np.array([[c, s], [-s, c]]) + rel[:2])
+        submap = np.concatenate(parts) if len(parts) > 1 else points
+        self._keyframe = _Keyframe(index, pose.copy(), submap,
+                                   NdtReference.from_points(submap, opts.cell_size_m, opts.cell_model))
+
+    # -- reporting -----------------------------------------------------------------------------
+
+    def warnings(self, topic: str = "the scans") -> list[str]:
+        """One line per kind of trouble, with counts (nothing when all went well)."""
+        pairs = max(len(self.run.steps) - 1, 0)
+        out = []
+        if self.counts[FALLBACK] and self.counts[FALLBACK] >= max(1, 0.02 * pairs):
+            out.append(f"{self.counts[FALLBACK]} of {pairs} scan pairs on {topic} could not be matched (score below "
+                       f"{self.options.min_score:g}) and kept their guess: the trajectory is less reliable there")
+        if self.counts[ODOM_REJECTED]:
+            out.append(f"{self.counts[ODOM_REJECTED]} odometry step(s) contradicted by the scan match beyond the "
+                       "odometry's noise (corrupt or slipping samples) were not followed")
+        if self.counts[TOO_FAST]:
+            out.append(f"{self.counts[TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
+                       "the robot can move: check the scans there")
+        return out
+
+    def summary_counts(self) -> dict[str, int]:
+        pairs = max(len(self.run.steps) - 1, 0)
+        return {"pairs": pairs, "searched": self.counts[SEARCHED], "fallbacks": self.counts[FALLBACK],
+                "odometry_rejected": self.counts[ODOM_REJECTED], "faster_than_robot": self.counts[TOO_FAST],
+                "keyframes": len(self.run.keyframe_indexes)}
+
+
+def _close(a: np.ndarray, b: np.ndarray, tol_m: float, tol_rad: float) -> bool:
+    d = se2_between(a, b)
+    return bool(np.hypot(d[0], d[1]) <= tol_m and abs(d[2]) <= tol_rad)
+
+
+def _voxel_filter(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """One point (the mean) per square voxel of side ``voxel_m``: near walls, where a scanner's beams crowd,
+    stop outweighing the far features that tell one place in a corridor from the next."""
+    if voxel_m <= 0 or len(points) == 0:
+        return points
+    from bagtools.cloudmap.accumulator import voxel_downsample
+
+    xyz = np.column_stack((points, np.zeros(len(points))))
+    return voxel_downsample(xyz, voxel_m)[:, :2].astype(np.float64)
