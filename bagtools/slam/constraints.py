@@ -23,8 +23,12 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    apart). :func:`~bagtools.ndt.match_scans_grid` searches a window around the
    estimated relative pose, +- ``gate_sigmas`` sigmas (at least
    ``min_window_m``/``min_window_rad``, at most the search radius and a full
-   turn); NDT (``ndt_cell_m`` cells, widened model) refines the best pose and
-   must stay within ``max_refine_m``/``max_refine_rad`` of it.
+   turn), in steps of ``resolution_m`` and of the angle that moves a point
+   ``angular_reach_m`` away by one step; NDT (``ndt_cell_m`` cells, widened
+   model) refines the best pose and must stay within
+   ``max_refine_m``/``max_refine_rad`` of it. Wide windows (``wide_window_m``
+   and more: the estimate is unsure) cost tens of milliseconds: at most one is
+   searched per ``wide_spacing_m`` of path.
 3. **Covariance** (:func:`loop_covariance`): the ambiguity of the correlative
    search (Olson's likelihood-weighted spread around the best pose), the
    inverse NDT Hessian (large along a corridor, where the match is weak), the
@@ -85,13 +89,15 @@ class LoopOptions:
     min_window_m: float = 0.3
     min_window_rad: float = 0.1
     resolution_m: float = 0.1
-    angular_resolution_rad: float | None = None
+    angular_reach_m: float = 10.0
     max_range_m: float = 20.0
     max_points: int = 1500
     min_score: float = 0.5
     old_map_keyframes: int = 3
     new_map_keyframes: int = 4
     max_candidates: int = 2
+    wide_window_m: float = 2.0
+    wide_spacing_m: float = 2.0
     loop_spacing_m: float = 1.0
     sure_sigma_m: float = 0.3
     pending_keyframes: int = 10
@@ -102,7 +108,7 @@ class LoopOptions:
     cache_size: int = 64
 
     def __post_init__(self) -> None:
-        for name in ("search_radius_m", "min_travel_m", "drift_per_m", "drift_rad_per_m", "loop_edge_m",
+        for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m", "drift_rad_per_m", "loop_edge_m", "angular_reach_m",
                      "gate_sigmas", "min_window_m", "min_window_rad", "resolution_m", "max_range_m", "loop_spacing_m",
                      "sure_sigma_m", "pair_max_path_m", "ndt_cell_m", "max_refine_m", "max_refine_rad"):
             value = getattr(self, name)
@@ -235,6 +241,7 @@ class LoopClosureSearch:
         self.path_m: list[float] = []  # per keyframe: distance along the path from the first, metres
         self.motions: list[np.ndarray] = []  # per keyframe: [x, y, theta] from the previous keyframe
         self.motion_covariances: list[np.ndarray] = []  # and its covariance
+        self._last_wide_m = -math.inf  # path length at the last wide search
         self._cache: OrderedDict[int, _OldMap] = OrderedDict()
 
     def add_keyframe(self, points_base: np.ndarray, motion: np.ndarray | None,
@@ -293,6 +300,7 @@ class LoopClosureSearch:
             return []
         dist = np.hypot(*(poses[old, :2] - poses[new, :2]).T)
         sigma_t, _ = self.sigmas(graph_distance_m[old])
+        sigma_t_of = dict(zip(old.tolist(), sigma_t.tolist()))
         reach = dist <= o.search_radius_m + o.gate_sigmas * sigma_t
         old, dist = old[reach], dist[reach]
         if old.size == 0:
@@ -305,7 +313,16 @@ class LoopClosureSearch:
                 continue
             picks.append((float(d.min()), int(run[np.argmin(d)])))
         picks.sort()
-        return [a for _, a in picks[: o.max_candidates]]
+        chosen: list[int] = []
+        for _, a in picks:
+            if len(chosen) == o.max_candidates:
+                break
+            if self.window((float(sigma_t_of[a]), 0.0))[0] >= o.wide_window_m:
+                if path[new] - self._last_wide_m < o.wide_spacing_m:
+                    continue
+                self._last_wide_m = float(path[new])
+            chosen.append(a)
+        return chosen
 
     def _tied(self, run: np.ndarray, new: int, loops: list[tuple[int, int]]) -> bool:
         """True if an accepted loop from the last ``loop_spacing_m`` of path already lands in (or next to) ``run``."""
@@ -330,6 +347,16 @@ class LoopClosureSearch:
         if len(self._cache) > o.cache_size:
             self._cache.popitem(last=False)
         return built
+
+    def window(self, sigma: tuple[float, float]) -> np.ndarray:
+        """Search half-widths (m, m, rad) for an estimate of uncertainty ``sigma`` (m, rad)."""
+        o = self.options
+        half_m = min(max(o.gate_sigmas * sigma[0], o.min_window_m), o.search_radius_m)
+        return np.array([half_m, half_m, min(max(o.gate_sigmas * sigma[1], o.min_window_rad), math.pi)])
+
+    def angular_step(self, reach_m: float) -> float:
+        """Rotation step of the search (rad): a point ``reach_m`` from the keyframe moves by one raster cell."""
+        return self.options.resolution_m / max(reach_m, self.options.resolution_m)
 
     def _old_range(self, old: int) -> range:
         """The keyframes of the old map around ``old``."""
@@ -367,13 +394,13 @@ class LoopClosureSearch:
         o = self.options
         t0 = time.perf_counter()
         guess = se2_between(poses[old], poses[new])
-        window = np.array([min(max(o.gate_sigmas * sigma[0], o.min_window_m), o.search_radius_m)] * 2
-                          + [min(max(o.gate_sigmas * sigma[1], o.min_window_rad), math.pi)])
+        window = self.window(sigma)
         cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])))
         old_map = self._old_map(old, poses)
         current = self._new_map(new, poses)
+        reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
         grid = match_scans_grid(current, old_map.correlative, initial_pose=guess, search_range=window,
-                                angular_resolution_rad=o.angular_resolution_rad, min_score=o.min_score)
+                                angular_resolution_rad=self.angular_step(reach), min_score=o.min_score)
         if not grid.ok:
             cand.status = TOO_FEW_POINTS if "too few" in grid.reason else LOW_SCORE
             cand.time_s = time.perf_counter() - t0
@@ -408,7 +435,7 @@ class ConsistencyCheck:
         """Largest disagreement (m, rad) with an estimate of uncertainty ``sigma`` that passes."""
         o = self.options
         return (o.gate_sigmas * sigma[0] + 2 * o.resolution_m,
-                o.gate_sigmas * sigma[1] + 2 * (o.angular_resolution_rad or 0.01))
+                o.gate_sigmas * sigma[1] + 2 * o.resolution_m / o.angular_reach_m)
 
     def review(self, cand: LoopCandidate, poses: np.ndarray) -> list[LoopCandidate]:
         """Judge a matched candidate against the estimate ``poses``; returns the candidates accepted now."""
@@ -450,7 +477,7 @@ class ConsistencyCheck:
         cycle = se2_between(a.T_old_new, through_b)
         chain_m = old_gap + new_gap
         sigma_t = math.sqrt(2.0) * o.resolution_m + o.drift_per_m * chain_m
-        sigma_r = math.sqrt(2.0) * (o.angular_resolution_rad or 0.01) + o.drift_rad_per_m * chain_m
+        sigma_r = math.sqrt(2.0) * o.resolution_m / o.angular_reach_m + o.drift_rad_per_m * chain_m
         return bool(np.hypot(cycle[0], cycle[1]) <= o.gate_sigmas * sigma_t
                     and abs(wrap_to_pi(cycle[2])) <= o.gate_sigmas * sigma_r)
 

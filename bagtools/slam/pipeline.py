@@ -2,12 +2,13 @@
 
     SlamPipeline(bag, options).run()
         _check_bag()        the scan topic is there (one-line error before any work)
-        _front_end()        laser odometry: every scan registered, keyframes chained (bagtools.ndtodom)
+        _front_end()        laser odometry: every scan registered, keyframes chained (bagtools.ndtodom.run_front_end)
         _back_end()         keyframes as nodes, loop search, GTSAM optimization (bagtools.slam.backend)
         _trajectories()     every scan's pose: a keyframe's optimized pose, or its keyframe's composed with
                             its match; the front end's alone
         _map()              the occupancy grid at the optimized poses (bagtools.gridmap)
-        _evaluate()         against /ground_truth when the bag has it: APE, RPE, aligned APE, gap errors
+        _evaluate()         against the bag's /ground_truth (as the front end reads it): APE, RPE, aligned APE,
+                            gap errors
         _summary()
 
 Frames. The front end gives poses of the robot base in its odometry frame (the
@@ -17,7 +18,8 @@ was at the first scan: the first keyframe is held at its front-end pose, so
 ``trajectory.tum`` and ``odometry.tum`` start at the same pose and part as the
 loops correct the drift. ``ground_truth.tum`` is the bag's ``/ground_truth``
 moved into the map frame so that it starts at the first scan's pose too (as
-``evo --align_origin``): evo compares the files directly.
+``evo --align_origin``; the front end's ground truth, as ``ndt-odom`` writes
+it): evo compares the files directly.
 """
 
 from __future__ import annotations
@@ -36,16 +38,14 @@ from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid
 from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.gridmap.options import MAX_RESOLUTION, MIN_RESOLUTION
-from bagtools.io import LASERSCAN_TYPES, decode_laserscan, open_bag, read_tf_arrays
+from bagtools.io import LASERSCAN_TYPES, open_bag
+from bagtools.ndtodom import NdtOdomOptions, NdtOdomResult, run_front_end
 from bagtools.ndtodom.steps import FrontEndRun
-from bagtools.simtruth import read_ground_truth
 from bagtools.slam.backend import BackEndOptions, BackEndResult, build_pose_graph
 from bagtools.slam.constraints import ACCEPTED, LoopOptions
 from bagtools.slam.evaluate import trajectory_errors
-from bagtools.tf import TfBuffer
-from bagtools.tf.repair import guess_base_frame
 from bagtools.trajectory import Trajectory
-from bagtools.transforms import pose2tform, quat2xyzw, se2_between, se2_compose, tform2quat, wrap_to_pi
+from bagtools.transforms import pose2tform, se2_between, se2_compose, wrap_to_pi
 
 #: The frame name the map is built in by the grid pipeline: not the bag's "map" (see the module docstring).
 SLAM_FRAME = "slam_map"
@@ -103,15 +103,14 @@ class SlamOptions:
         return BackEndOptions(loop=loop, loop_kernel=self.loop_kernel)
 
 
-#: The front end: (bag path, options) -> every scan registered. The default is the laser odometry of bagtools.ndtodom.
-FrontEnd = Callable[[Path, SlamOptions], FrontEndRun]
+#: The front end: (bag path, options) -> its result, whose ``front_end`` holds every scan registered
+#: (a :class:`~bagtools.ndtodom.steps.FrontEndRun`). The default is the laser odometry of bagtools.ndtodom.
+FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 
 
-def laser_odometry(bag_path: Path, options: SlamOptions) -> FrontEndRun:
+def laser_odometry(bag_path: Path, options: SlamOptions) -> NdtOdomResult:
     """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting."""
-    from bagtools.ndtodom.frontend import run_front_end
-
-    return run_front_end(bag_path, topic=options.topic, use_odometry=options.use_odometry)
+    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry))
 
 
 @dataclass
@@ -147,20 +146,21 @@ class SlamPipeline:
         self.front_end = front_end or laser_odometry
         self.warnings: list[str] = []
         self.timing_s: dict[str, float] = {}
-        self.base_frame = ""
-        self.tf = TfBuffer()
 
     def run(self) -> SlamResult:
         t0 = time.perf_counter()
         self._check_bag()
-        front = self._timed("front_end", self._front_end)
+        result = self._timed("front_end", self._front_end)
+        front = result.front_end
         back = self._timed("back_end", lambda: self._back_end(front))
         trajectory, odometry = self._trajectories(front, back)
-        grid, map_summary = self._timed("map", lambda: self._map(trajectory))
-        ground_truth, evaluation = self._timed("evaluation", lambda: self._evaluate(trajectory, odometry))
+        base_frame = result.summary.get("base_frame") or None
+        grid, map_summary = self._timed("map", lambda: self._map(trajectory, base_frame))
+        ground_truth = result.ground_truth
+        evaluation = self._timed("evaluation", lambda: self._evaluate(ground_truth, trajectory, odometry))
         self.timing_s["total"] = time.perf_counter() - t0
         loops = self._loop_segments(back)
-        summary = self._summary(front, back, map_summary, evaluation)
+        summary = self._summary(result, back, map_summary, evaluation)
         return SlamResult(trajectory, odometry, ground_truth, grid, back, loops, summary)
 
     def _timed(self, name: str, fn: Callable):
@@ -172,24 +172,18 @@ class SlamPipeline:
     # -- steps -------------------------------------------------------------------------------
 
     def _check_bag(self) -> None:
-        """Refuse a bag without the scan topic; find the robot base frame and the tf (for the map and the truth)."""
+        """Refuse a bag without the scan topic, before any work."""
         with open_bag(self.bag_path) as bag:
             require_topic(bag, self.options.topic, LASERSCAN_TYPES, "LaserScan")
-            first = next(bag.messages([self.options.topic]), None)
-            if first is None:
+            if next(bag.messages([self.options.topic]), None) is None:
                 raise BagtoolsError(f"topic {self.options.topic} holds no scans", self.bag_path)
-            dynamic, static = read_tf_arrays(bag)
-            self.tf = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
-            scan_frame = decode_laserscan(first.msg).frame_id.lstrip("/")
-            self.base_frame = guess_base_frame(bag, set(self.tf.frames)) or scan_frame
 
-    def _front_end(self) -> FrontEndRun:
-        front = self.front_end(self.bag_path, self.options)
-        self.warnings.extend(front.warnings)
-        if not front.steps:
-            raise BagtoolsError(f"no usable scan on {self.options.topic}: every scan was skipped (fewer than 5 valid "
-                                "returns, or a stamp not after the previous scan's)", self.bag_path)
-        return front
+    def _front_end(self) -> NdtOdomResult:
+        result = self.front_end(self.bag_path, self.options)
+        self.warnings.extend(result.front_end.warnings or result.summary.get("warnings", []))
+        if result.problem is not None or not result.front_end.steps:
+            raise BagtoolsError(result.problem or f"no usable scan on {self.options.topic}", self.bag_path)
+        return result
 
     def _back_end(self, front: FrontEndRun) -> BackEndResult:
         back = build_pose_graph(front.steps, self.options.back_end_options())
@@ -215,41 +209,21 @@ class SlamPipeline:
         stamps = front.stamps_ns()
         return Trajectory(stamps, pose2tform(poses).reshape(-1, 4, 4)), Trajectory(stamps, pose2tform(front.poses()).reshape(-1, 4, 4))
 
-    def _map(self, trajectory: Trajectory) -> tuple[OccupancyGrid, dict]:
+    def _map(self, trajectory: Trajectory, base_frame: str | None) -> tuple[OccupancyGrid, dict]:
+        """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of)."""
         o = self.options
         options = GridMapOptions(topic=o.topic, frame=SLAM_FRAME, poses="slam trajectory", resolution=1.0 / o.resolution_m,
-                                 max_range_m=o.max_range_m, base_frame=self.base_frame)
+                                 max_range_m=o.max_range_m, base_frame=base_frame)
         result = GridMapPipeline(self.bag_path, options, trajectory=trajectory).run()
         self.warnings.extend(w for w in result.summary.get("warnings", []) if w not in self.warnings)
         summary = {k: v for k, v in result.summary.items() if k not in ("options", "warnings", "bag", "poses")}
         return result.grid, summary
 
-    def _evaluate(self, trajectory: Trajectory, odometry: Trajectory) -> tuple[Trajectory | None, dict]:
-        """Ground truth in the map frame, anchored at the first scan, and the errors of SLAM and the front end."""
-        with open_bag(self.bag_path) as bag:
-            truth = read_ground_truth(bag, warnings=self.warnings)
-            if truth is None:
-                return None, {}
-        stamps_gt, T_map_gt, gt_frame = truth
-        gt_frame, base, buffer = gt_frame.lstrip("/"), self.base_frame, self.tf
-        if gt_frame == base:
-            T_gt_base = np.eye(4)
-        elif buffer.can_transform(gt_frame, base):
-            T_gt_base = buffer.lookup(gt_frame, base, None)
-        else:
-            self.warnings.append(f"/ground_truth is of {gt_frame}, which tf does not connect to the robot base "
-                                 f"{base}: not evaluated")
-            return None, {}
-        truth_buffer = TfBuffer()
-        T = T_map_gt @ T_gt_base
-        truth_buffer.set_transform("map", "truth", stamps_gt, T[:, :3, 3], quat2xyzw(tform2quat(T)))
-        T_map_start, ok = truth_buffer.lookup("map", "truth", trajectory.stamps_ns[:1], return_mask=True)
-        if not ok[0]:
-            self.warnings.append("/ground_truth does not cover the first scan's stamp: not evaluated")
-            return None, {}
-        anchor = trajectory.poses[0] @ np.linalg.inv(T_map_start[0])
-        ground_truth = Trajectory(stamps_gt, anchor @ T)
-        evaluation = {
+    def _evaluate(self, ground_truth: Trajectory | None, trajectory: Trajectory, odometry: Trajectory) -> dict:
+        """The errors of SLAM and of the front end against the ground truth (in the map frame), if there is one."""
+        if ground_truth is None:
+            return {}
+        return {
             "evaluation": {
                 "reference": "ground_truth.tum (/ground_truth in the map frame, starting at the first scan's pose)",
                 "ape_translation_m": "evo_ape tum ground_truth.tum <trajectory> (translation, no alignment)",
@@ -260,14 +234,16 @@ class SlamPipeline:
             "errors_slam": trajectory_errors(ground_truth, trajectory),
             "errors_front_end": trajectory_errors(ground_truth, odometry),
         }
-        return ground_truth, evaluation
 
     def _loop_segments(self, back: BackEndResult) -> np.ndarray:
         pairs = [(c.old, c.new) for c in back.candidates if c.status == ACCEPTED]
         poses = back.graph.poses
         return np.array([[poses[a, :2], poses[b, :2]] for a, b in pairs]).reshape(-1, 2, 2)
 
-    def _summary(self, front: FrontEndRun, back: BackEndResult, map_summary: dict, evaluation: dict) -> dict:
+    def _summary(self, result: NdtOdomResult, back: BackEndResult, map_summary: dict, evaluation: dict) -> dict:
+        front = result.front_end
+        front_summary = {k: v for k, v in result.summary.items()
+                         if k not in ("bag", "topic", "options", "warnings", "evaluation") and not k.startswith("errors_")}
         statuses = Counter(c.status for c in back.candidates)
         accepted = statuses.pop(ACCEPTED, 0)
         graph = back.graph
@@ -279,7 +255,7 @@ class SlamPipeline:
             "frame": "map: the front end's odometry frame at the first scan (the first keyframe held at its pose)",
             "scans": len(front.steps),
             "keyframes": graph.n_nodes,
-            "front_end": {"counts": dict(front.counts), "warnings": list(front.warnings)},
+            "front_end": front_summary,
             "graph": {
                 "nodes": graph.n_nodes,
                 "odometry_edges": sum(c.kind == "odometry" for c in graph.constraints),

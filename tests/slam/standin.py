@@ -19,10 +19,12 @@ import numpy as np
 
 from bagtools.dataset import ScanStream
 from bagtools.io import open_bag, read_tf_arrays
+from bagtools.ndtodom import NdtOdomResult
 from bagtools.ndtodom.steps import FrontEndRun, ScanStep
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer
-from bagtools.transforms import quat2xyzw, se2_between, se2_compose, tform2pose, tform2quat, wrap_to_pi
+from bagtools.trajectory import Trajectory
+from bagtools.transforms import pose2tform, quat2xyzw, se2_between, se2_compose, tform2pose, tform2quat, wrap_to_pi
 
 
 @dataclass(frozen=True)
@@ -100,3 +102,29 @@ def true_poses_at_scans(bag_path: str | Path, topic: str = "/scan") -> tuple[np.
     truth.set_transform("map", gt_frame.lstrip("/"), stamps_gt, T_map_gt[:, :3, 3], quat2xyzw(tform2quat(T_map_gt)))
     T = truth.lookup("map", gt_frame.lstrip("/"), np.clip(stamps, stamps_gt[0], stamps_gt[-1]))
     return stamps, tform2pose(T)
+
+
+def as_front_end_result(bag_path: str | Path, run: FrontEndRun, with_truth: bool = True) -> NdtOdomResult:
+    """``run`` as the front end's result: the trajectory, and /ground_truth in the run's odometry frame anchored
+    at its first scan (as ``ndt-odom`` gives it; None with ``with_truth`` False or a bag without it)."""
+    stamps = run.stamps_ns()
+    trajectory = Trajectory(stamps, pose2tform(run.poses()).reshape(-1, 4, 4))
+    truth = None
+    with open_bag(bag_path) as bag:
+        found = read_ground_truth(bag) if with_truth else None
+    base = "base_footprint"
+    if found is not None:
+        stamps_gt, T_map_gt, base = found
+        base = base.lstrip("/")
+        buffer = TfBuffer()
+        buffer.set_transform("map", base, stamps_gt, T_map_gt[:, :3, 3], quat2xyzw(tform2quat(T_map_gt)))
+        T_start = buffer.lookup("map", base, stamps[:1])[0]
+        truth = Trajectory(stamps_gt, trajectory.poses[0] @ np.linalg.inv(T_start) @ T_map_gt)
+    return NdtOdomResult(trajectory, None, truth, run, {"base_frame": base, "warnings": list(run.warnings)})
+
+
+def standin(drift: Drift = Drift(), seed: int = 0):
+    """A front end for :class:`~bagtools.slam.SlamPipeline`: :func:`front_end_from_truth` as the front end's result."""
+    def front_end(bag_path, options) -> NdtOdomResult:
+        return as_front_end_result(bag_path, front_end_from_truth(bag_path, options.topic, drift, seed))
+    return front_end

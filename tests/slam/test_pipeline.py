@@ -24,13 +24,13 @@ from tests.conftest import FIXTURES, make_scan, write_bag
 from tests.ndtodom.conftest import scan_bag
 from simulate.sensors.lidar import Lidar
 from tests.slam.conftest import CSAIL_DRIFT
-from tests.slam.standin import front_end_from_truth, true_poses_at_scans
+from tests.slam.standin import as_front_end_result, front_end_from_truth, true_poses_at_scans
 
 T0_NS = 1_700_000_000_000_000_000
 
 
-def _recorded(front: FrontEndRun):
-    return lambda bag, options: front
+def _recorded(front: FrontEndRun, with_truth: bool = True):
+    return lambda bag, options: as_front_end_result(bag, front, with_truth)
 
 
 @pytest.fixture(scope="module")
@@ -122,14 +122,14 @@ def test_no_usable_scan_is_one_error(tmp_path: Path) -> None:
     bag = write_bag(tmp_path / "nan", [("/scan", "sensor_msgs/msg/LaserScan", T0_NS + i * 200_000_000,
                                         make_scan(T0_NS + i * 200_000_000, ranges)) for i in range(5)])
     with pytest.raises(BagtoolsError, match="no usable scan on /scan"):
-        SlamPipeline(bag, SlamOptions(), front_end=lambda b, o: FrontEndRun()).run()
+        SlamPipeline(bag, SlamOptions()).run()
 
 
 def test_bag_without_ground_truth_has_no_errors(tmp_path: Path, figure8_bag: Path, figure8_front: FrontEndRun) -> None:
     steps = figure8_front.steps[:200]
     stamps, truth = true_poses_at_scans(figure8_bag)
     bag = scan_bag(tmp_path / "no_truth", stamps[:200], pose2tform(truth[:200]), Lidar(), with_truth=False)
-    result = SlamPipeline(bag, SlamOptions(topic="/scan"), front_end=_recorded(FrontEndRun(steps))).run()
+    result = SlamPipeline(bag, SlamOptions(topic="/scan"), front_end=_recorded(FrontEndRun(steps), False)).run()
     assert result.ground_truth is None and "errors_slam" not in result.summary
     write_slam(result, tmp_path / "out")
     assert not (tmp_path / "out" / "ground_truth.tum").exists() and (tmp_path / "out" / "trajectory.tum").exists()
