@@ -120,7 +120,7 @@ def test_map_covariance_matches_a_monte_carlo_of_the_chain() -> None:
         search.add_keyframe(np.zeros((0, 2)), m, None if m is None else cov)
     predicted = search.map_covariance(1, range(0, 4))
     samples = []
-    for _ in range(4000):
+    for _ in range(2000):
         noisy = [m + rng.multivariate_normal(np.zeros(3), cov) for m in motions[1:]]
         before = se2_between(noisy[0], np.zeros(3))  # keyframe 0 in keyframe 1's frame
         after1 = noisy[1]
@@ -128,4 +128,4 @@ def test_map_covariance_matches_a_monte_carlo_of_the_chain() -> None:
         samples.append([before, after1, after2])
     samples = np.array(samples)  # (draws, keyframe, 3)
     empirical = sum(np.cov(samples[:, k].T) for k in range(3)) / 4
-    assert np.allclose(predicted, empirical, rtol=0.15, atol=2e-6), (predicted, empirical)
+    assert np.allclose(predicted, empirical, rtol=0.2, atol=2e-6), (predicted, empirical)
