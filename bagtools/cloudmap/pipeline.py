@@ -132,6 +132,7 @@ class CloudMapPipeline:
         dynamic, kept = repair_dynamic_tf(dynamic, self.warnings)
         arrival_ns = arrival_ns[kept]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
+        self.warnings.extend(self.buffer.warnings)
         self._arrival = _ArrivalIndex(dynamic, arrival_ns)
         self.base_frame = guess_base_frame(bag, set(self.buffer.frames))
         if not self.buffer.frames:

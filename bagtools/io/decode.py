@@ -173,8 +173,10 @@ def _xyz_view(msg: Any) -> np.ndarray:
             f"PointCloud2 layout is inconsistent: {height}x{width} points, point_step {point_step}, "
             f"row_step {row_step}, {data.size} data bytes"
         )
-    if row_step != width * point_step:  # padded rows: drop the padding, row by row in one reshape
-        data = data[: height * row_step].reshape(height, row_step)[:, : width * point_step].reshape(-1)
+    if row_step != width * point_step:  # padded rows: a strided view of the rows (the checks above bound it)
+        rows = np.lib.stride_tricks.as_strided(data, shape=(height, width * point_step), strides=(row_step, 1),
+                                               writeable=False)
+        data = rows.reshape(-1)
     offsets = [int(fields[n].offset) for n in "xyz"]
     for name, offset, kind in zip("xyz", offsets, kinds):
         if offset < 0 or offset + int(kind[1:]) > point_step:
@@ -209,8 +211,9 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
             rest = xyz[~keep]
             n_implausible = int(np.isfinite(rest).all(axis=1).sum())
         xyz = xyz.take(np.flatnonzero(keep), axis=0)
-    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, np.asarray(xyz, dtype=np.float32),
-                       n_implausible)
+    with np.errstate(over="ignore"):  # with keep_nan, float64 beyond float32's range becomes inf
+        points = np.asarray(xyz, dtype=np.float32)
+    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible)
 
 
 @dataclass(frozen=True)

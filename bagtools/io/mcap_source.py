@@ -79,7 +79,8 @@ class McapScan:
     complete: bool = False  # the footer was reached
     cut_at_byte: int | None = None  # where a truncated file ends in the middle of a record
     damage: list[str] = field(default_factory=list)
-    lost_messages: int = 0  # messages known (from message indexes) to be in unreadable chunks
+    lost_messages: int = 0
+    chunk_heads: dict[int, tuple[int, int, int, int]] = field(default_factory=dict)  # offset -> sizes and times  # messages known (from message indexes) to be in unreadable chunks
 
     @property
     def message_count(self) -> int:
@@ -155,25 +156,56 @@ def chunk_records(data: bytes) -> Iterator[Schema | Channel | Message]:
         pos = body + length
 
 
-def _summary_chunk_offsets(f: io.BufferedReader, size: int) -> list[int]:
-    """Chunk offsets from the summary's chunk indexes, or [] when the footer or summary is unreadable."""
+def _summary_records(f: io.BufferedReader, size: int) -> list[object] | None:
+    """The records of the summary section (from the footer's summary start), None when unreadable or absent."""
     if size < len(MCAP_MAGIC) * 2 + _FOOTER_BYTES:
-        return []
+        return None
     try:
         f.seek(size - len(MCAP_MAGIC) - _FOOTER_BYTES)
         footer = next(StreamReader(f, skip_magic=True, record_size_limit=64).records)
         if not isinstance(footer, Footer) or not 0 < footer.summary_start < size:
-            return []
+            return None
         f.seek(footer.summary_start)
-        offsets = []
+        records = []
         for record in StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records:
-            if isinstance(record, ChunkIndex):
-                offsets.append(int(record.chunk_start_offset))
-            elif isinstance(record, Footer):
+            if isinstance(record, Footer):
                 break
-        return sorted(o for o in offsets if 0 < o < size)
+            records.append(record)
+        return records
     except (*_READ_ERRORS, StopIteration):
-        return []
+        return None
+
+
+def _summary_chunk_offsets(f: io.BufferedReader, size: int) -> list[int]:
+    """Chunk offsets from the summary's chunk indexes, or [] when the footer or summary is unreadable."""
+    records = _summary_records(f, size) or []
+    return sorted(int(r.chunk_start_offset) for r in records
+                  if isinstance(r, ChunkIndex) and 0 < r.chunk_start_offset < size)
+
+
+def _check_summary(f: io.BufferedReader, size: int, scan: McapScan) -> None:
+    """Note (as damage) a summary that disagrees with the data: other readers trust it and would fail or lie."""
+    records = _summary_records(f, size)
+    if records is None:  # no summary (allowed) or none readable: nothing to disagree with
+        return
+    wrong = 0
+    for record in records:
+        if isinstance(record, ChunkIndex):
+            head = scan.chunk_heads.get(int(record.chunk_start_offset))
+            if head is None or head != (record.compressed_size, record.uncompressed_size, record.message_start_time,
+                                        record.message_end_time):
+                wrong += 1
+        elif isinstance(record, Schema):
+            ours = scan.schemas.get(record.id)
+            wrong += ours is not None and (ours.name, ours.encoding, bytes(ours.data)) != (
+                record.name, record.encoding, bytes(record.data))
+        elif isinstance(record, Channel):
+            ours = scan.channels.get(record.id)
+            wrong += ours is not None and (ours.topic, ours.schema_id, ours.message_encoding) != (
+                record.topic, record.schema_id, record.message_encoding)
+    if wrong:
+        scan.damage.append(f"{wrong} record(s) of the summary section disagree with the data (other readers may fail "
+                           "or misread this file); the data itself was read without them")
 
 
 class _Walker:
@@ -244,6 +276,11 @@ def scan_mcap(path: Path) -> McapScan:
             if scan.complete or walker.failed_at is None:
                 if not scan.complete:
                     scan.cut_at_byte = size
+                elif not _ends_with_magic(f, size):
+                    scan.damage.append("the file ends without its closing magic (cut after the footer); no message "
+                                       "is missing")
+                else:
+                    _check_summary(f, size, scan)
                 return _finish(scan)
             # A record could not be read. Resume at the next chunk the summary knows, if any.
             failed_at = walker.failed_at
@@ -278,6 +315,9 @@ def _settle(scan: McapScan, chunk_tally: list[int]) -> None:
 
 def _scan_chunk(scan: McapScan, position: int, chunk: Chunk, partial: bool = False) -> int:
     """Add a chunk's readable messages to ``scan`` (noting any damage); return how many there are."""
+    if not partial:
+        scan.chunk_heads[position] = (len(chunk.data), chunk.uncompressed_size, chunk.message_start_time,
+                                      chunk.message_end_time)
     try:
         data = decompress_chunk(chunk, allow_partial=partial)
     except ChunkDamaged as err:

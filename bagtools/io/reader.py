@@ -269,6 +269,30 @@ def _topics_of(connections: Iterable[Connection], count: Callable[[Connection], 
     return topics
 
 
+def _metadata_disagreements(directory: Path, storage: list[Path], source: Any) -> list[str]:
+    """What a rosbag2 metadata.yaml gets wrong about the MCAP files beside it (read directly instead)."""
+    from ruamel.yaml import YAML, YAMLError
+
+    where = directory / "metadata.yaml"
+    try:
+        info = YAML(typ="safe", pure=True).load(where.read_bytes())["rosbag2_bagfile_information"]
+        counts = {t["topic_metadata"]["name"]: int(t["message_count"]) for t in info.get("topics_with_message_count") or []}
+        files = [str(f) for f in info.get("relative_file_paths") or []]
+        compression = (str(info.get("compression_mode") or ""), str(info.get("compression_format") or ""))
+    except (YAMLError, OSError, UnicodeDecodeError, KeyError, TypeError, ValueError, AttributeError) as err:
+        return [f"{where}: unreadable ({_one_line(err)}); read the storage files directly"]
+    out = []
+    missing = [f for f in files if not (directory / f).exists()]
+    if missing:
+        out.append(f"{where}: lists files that are not there ({', '.join(missing[:3])}); read the storage files directly")
+    if compression[0].lower() == "file" and compression[1]:
+        out.append(f"{where}: says the files are {compression[1]}-compressed, but they are plain MCAP; read as they are")
+    stored = sum(t.count for t in source.topics.values())
+    if counts and sum(counts.values()) != stored:
+        out.append(f"{where}: counts {sum(counts.values())} messages, the storage holds {stored}; trusting the storage")
+    return out
+
+
 def _storage_files(directory: Path) -> list[Path]:
     return sorted(p for p in directory.iterdir() if p.is_file() and p.suffix in (".mcap", ".db3"))
 
@@ -347,7 +371,9 @@ class BagReader:
         if storage and all(p.suffix == ".mcap" for p in storage):
             # MCAP files carry their own schemas and counts: read them directly, which also survives
             # damage and a metadata.yaml that disagrees with them (counts, QoS, compression).
-            return self._open_storage(storage)
+            source = self._open_storage(storage)
+            self.warnings.extend(_metadata_disagreements(directory, storage, source))
+            return source
         try:
             source: Any = _AnySource([directory])
         except _READ_ERRORS as err:

@@ -225,6 +225,7 @@ class NdtOdomPipeline:
                 dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
         try:
             self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
+            self.warnings.extend(self.buffer.warnings)
         except BagtoolsError as err:
             raise BagtoolsError(f"the bag's tf data cannot be used: {err.problem}", bag.path) from err
 

@@ -250,6 +250,10 @@ class TfBuffer:
             from bagtools.tf.repair import repair_dynamic_tf
 
             dynamic = repair_dynamic_tf(dynamic, buffer.warnings)[0]
+        if skip_invalid:
+            from bagtools.tf.repair import parent_conflicts
+
+            buffer.warnings.extend(parent_conflicts(dynamic, static))
         for arrays, is_static in ((static, True), (dynamic, False)):
             if arrays is not None and len(arrays):
                 buffer._set(arrays.parent, arrays.child, arrays.stamp_ns, arrays.translation, arrays.rotation_xyzw,
@@ -374,6 +378,14 @@ class TfBuffer:
     # ------------------------------------------------------------------ validation
 
     def _check_id(self, frame: str, argument: str) -> int:
+        self._check_format(frame, argument)
+        frame_id = self._ids.get(frame)
+        if frame_id is None:
+            raise LookupException(f"\"{frame}\" passed to {argument} does not exist{self.invalid_note(frame)}. "
+                                  f"{self._known_frames()}", self.path)
+        return frame_id
+
+    def _check_format(self, frame: str, argument: str) -> None:
         if not isinstance(frame, str) or frame == "":
             raise InvalidArgumentException(
                 f"Invalid argument \"{frame}\" passed to {argument} - in tf2 frame_ids cannot be empty", self.path)
@@ -381,11 +393,6 @@ class TfBuffer:
             raise InvalidArgumentException(
                 f"Invalid argument \"{frame}\" passed to {argument} - in tf2 frame_ids cannot start with a '/'",
                 self.path)
-        frame_id = self._ids.get(frame)
-        if frame_id is None:
-            raise LookupException(f"\"{frame}\" passed to {argument} does not exist{self.invalid_note(frame)}. "
-                                  f"{self._known_frames()}", self.path)
-        return frame_id
 
     def invalid_note(self, *frames: str) -> str:
         """Why a frame may be missing or cut off: its transforms were invalid and dropped when loading."""
@@ -540,7 +547,7 @@ class TfBuffer:
 
         Never raises for unknown or malformed frames (returns False), as tf2's canTransform.
         """
-        if target == source:
+        if target == source and isinstance(target, str) and target and not target.startswith("/"):
             return True if stamp_ns is None or np.ndim(stamp_ns) == 0 else np.ones(np.shape(stamp_ns), dtype=bool)
         try:
             valid = self.lookup(target, source, stamp_ns, return_mask=True)[1]
@@ -558,6 +565,13 @@ class TfBuffer:
     # ------------------------------------------------------------------ internals of a lookup
 
     def _lookup_rigid(self, target: str, source: str, stamp_ns, api: str):
+        if target == source:  # tf2: the identity, whether or not the buffer knows the frame
+            self._check_format(target, f"{api} argument target_frame")
+            stamps = np.zeros(1, dtype=np.int64) if stamp_ns is None else _as_stamps(stamp_ns, "stamp_ns")
+            n = stamps.size
+            q = np.zeros((4, n))
+            q[3] = 1.0
+            return q, np.zeros((3, n)), np.ones(n, dtype=bool), stamp_ns is None or np.ndim(stamp_ns) == 0, {}, (0, 0)
         target_id = self._check_id(target, f"{api} argument target_frame")
         source_id = self._check_id(source, f"{api} argument source_frame")
         single = stamp_ns is None or np.ndim(stamp_ns) == 0
@@ -607,6 +621,8 @@ class TfBuffer:
         t = np.zeros((3, n))
         valid = np.zeros(n, dtype=bool)
         failure: dict[int, _Failure] = {}
+        if n == 0:
+            return q, t, valid, failure
         if target_id == source_id:
             valid[:] = True
             return q, t, valid, failure

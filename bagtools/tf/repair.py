@@ -86,6 +86,7 @@ def _unit(q: np.ndarray) -> np.ndarray:
 class EdgeFindings:
     """What :func:`inspect_edge` found on one dynamic (parent, child) edge; ``drop`` indexes rows of the edge."""
 
+    stray: int = 0  # samples stamped far from all the others (an unset clock: 1 ns)
     repeated: int = 0  # samples at a stamp the edge already had
     conflicting: int = 0  # ... of which with another value
     interleaved: str = ""  # a description of two interleaved publishers, and which one is kept
@@ -126,8 +127,9 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
     """
     n = stamps_ns.size
     found = EdgeFindings()
-    rows = np.arange(n)
-    repeated = np.flatnonzero(stamps_ns[1:] == stamps_ns[:-1]) + 1
+    rows = _without_stray_stamps(stamps_ns)
+    found.stray = n - rows.size
+    repeated = rows[np.flatnonzero(stamps_ns[rows][1:] == stamps_ns[rows][:-1]) + 1]
     if repeated.size:
         first = np.searchsorted(stamps_ns, stamps_ns[repeated], side="left")
         differ = (np.linalg.norm(translation[repeated] - translation[first], axis=1) > 1e-6) | (
@@ -152,6 +154,30 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
         rows = np.delete(rows, glitch)
     found.drop = np.setdiff1d(np.arange(n), rows)
     return found
+
+
+#: A sample at the start or end of an edge more than this far in time from the rest is a stray stamp...
+STRAY_GAP_S = 3600.0
+#: ... or more than this many times the edge's median time step (and at least 60 s) away.
+STRAY_GAP_STEPS = 1000.0
+
+
+def _without_stray_stamps(stamps_ns: np.ndarray) -> np.ndarray:
+    """Rows (in stamp order) except leading or trailing samples separated from the rest by a huge gap."""
+    n = stamps_ns.size
+    rows = np.arange(n)
+    if n < 5:
+        return rows
+    gaps = np.diff(stamps_ns) / 1e9
+    limit = min(STRAY_GAP_S, max(60.0, STRAY_GAP_STEPS * float(np.median(gaps))))
+    big = np.flatnonzero(gaps > limit)
+    lo, hi = 0, n
+    for g in big.tolist():  # a handful of gaps at most: the edges of the series
+        if g + 1 <= 2:
+            lo = max(lo, g + 1)
+        elif g >= n - 3:
+            hi = min(hi, g + 1)
+    return rows[lo:hi]
 
 
 def _sign_aligned(q: np.ndarray) -> np.ndarray:
@@ -265,6 +291,9 @@ def describe_findings(parent: str, child: str, found: EdgeFindings, repaired: bo
     """One line per kind of finding on the edge (``repaired``: say what was dropped)."""
     out = []
     edge = f"/tf {parent} -> {child}"
+    if found.stray:
+        out.append(f"{edge}: {'dropped ' if repaired else ''}{found.stray} sample(s) stamped far from all the others "
+                   "(an unset clock?)")
     if found.conflicting:
         out.append(f"{edge}: {found.conflicting} stamp(s) published twice with different values "
                    f"(two publishers?){'; kept the first of each' if repaired else ''}")
@@ -302,20 +331,28 @@ def _edges(dynamic: TfArrays, keep: np.ndarray | None = None) -> dict[tuple[str,
     return out
 
 
+def parent_conflicts(dynamic: TfArrays | None, static: TfArrays | None) -> list[str]:
+    """One line per frame published with more than one parent (on /tf, on /tf_static, or across them)."""
+    parents_of: dict[str, dict[str, set[str]]] = {}
+    for arrays, topic in ((dynamic, "/tf"), (static, "/tf_static")):
+        if arrays is None or not len(arrays):
+            continue
+        for parent, child in set(zip(arrays.parent.astype(str).tolist(), arrays.child.astype(str).tolist())):
+            parents_of.setdefault(child.lstrip("/"), {}).setdefault(parent.lstrip("/"), set()).add(topic)
+    out = []
+    for child, parents in sorted(parents_of.items()):
+        if len(parents) > 1:
+            named = ", ".join(f"{p} on {' and '.join(sorted(t))}" for p, t in sorted(parents.items()))
+            out.append(f"frame {child} has {len(parents)} parents ({named}); tf2 keeps one at a time, so lookups "
+                       "through it depend on which was published last")
+    return out
+
+
 def tf_conflicts(dynamic: TfArrays, static: TfArrays) -> list[str]:
     """What is wrong with a bag's tf, for ``info`` and ``tf frames``: frames with two parents, and per edge
-    conflicting stamps, glitches and interleaved publishers (as :func:`repair_dynamic_tf` would find them)."""
-    out = []
-    for arrays, topic in ((dynamic, "/tf"), (static, "/tf_static")):
-        if not len(arrays):
-            continue
-        parents_of: dict[str, set[str]] = {}
-        for parent, child in zip(arrays.parent.astype(str), arrays.child.astype(str)):
-            parents_of.setdefault(child.lstrip("/"), set()).add(parent.lstrip("/"))
-        for child, parents in sorted(parents_of.items()):
-            if len(parents) > 1:
-                out.append(f"{topic}: frame {child} has {len(parents)} parents ({', '.join(sorted(parents))}); "
-                           "tf2 keeps one at a time, so lookups through it depend on which was published last")
+    what :func:`repair_dynamic_tf` would repair (conflicting stamps, interleaved publishers, corrupt samples,
+    glitches, stray stamps)."""
+    out = parent_conflicts(dynamic, static)
     for (parent, child), rows in _edges(dynamic).items():
         found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows])
         out.extend(describe_findings(parent, child, found, repaired=False))

@@ -103,14 +103,21 @@ def test_damaged_chunk_length_of_last_chunk_is_damage_not_truncation(layout: dic
     assert 0 < len(got) < len(layout["reference"]) and _ordered_subset(got, layout["reference"])
 
 
-def test_wrong_summary_offsets_do_not_matter(layout: dict, tmp_path: Path) -> None:
+def test_wrong_summary_offsets_cost_nothing_but_are_said(layout: dict, tmp_path: Path) -> None:
     def edit(data: bytearray) -> None:
         for position, index in layout["chunk_indexes"]:
             struct.pack_into("<Q", data, position + 9 + 16, index.chunk_start_offset + 13)
 
     path = damaged(tmp_path, edit)
     with open_bag(path) as bag:
-        assert bag.warnings == []
+        assert len(bag.warnings) == 1 and "summary section disagree with the data" in bag.warnings[0]
+    assert all_messages(path) == layout["reference"]
+
+
+def test_missing_closing_magic_is_said(layout: dict, tmp_path: Path) -> None:
+    path = damaged(tmp_path, lambda d: d.__delitem__(slice(-1, None)))
+    with open_bag(path) as bag:
+        assert any("without its closing magic" in w for w in bag.warnings)
     assert all_messages(path) == layout["reference"]
 
 

@@ -133,7 +133,8 @@ def test_alternating_publishers_detected() -> None:
 def test_two_parents_reported() -> None:
     xyz, yaw = driving(10)
     both = TfArrays.concatenate([edge(xyz, yaw, parent="odom"), edge(xyz, yaw, parent="odom_alt")])
-    assert any("frame base_link has 2 parents (odom, odom_alt)" in w for w in tf_conflicts(both, TfArrays.empty()))
+    assert any("frame base_link has 2 parents (odom on /tf, odom_alt on /tf)" in w
+               for w in tf_conflicts(both, TfArrays.empty()))
 
 
 def test_real_turtlebot_glitches_found(real_dir) -> None:
@@ -145,3 +146,13 @@ def test_real_turtlebot_glitches_found(real_dir) -> None:
     assert any("8 corrupt" in w for w in report) and any("isolated glitch" in w for w in report)
     with open_bag(real_dir / "nav2_turtlebot.mcap") as bag:  # AMCL corrections are not glitches
         assert tf_conflicts(*read_tf_arrays(bag)) == []
+
+
+def test_stray_stamp_dropped() -> None:
+    xyz, yaw = driving(60)
+    stamps = T0 + np.arange(60, dtype=np.int64) * S // 20
+    stamps[0] = 1  # an unset clock
+    warnings: list[str] = []
+    kept, keep = repair_dynamic_tf(edge(xyz, yaw, stamps), warnings)
+    assert np.flatnonzero(~keep).tolist() == [0]
+    assert warnings == ["/tf odom -> base_link: dropped 1 sample(s) stamped far from all the others (an unset clock?)"]
