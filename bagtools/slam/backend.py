@@ -37,6 +37,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from bagtools.ndtodom.steps import ScanStep
+from bagtools.progress import progress
 from bagtools.slam.constraints import (
     ACCEPTED, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
 )
@@ -107,7 +108,9 @@ class _Builder:
         self._edges: list[tuple[int, int, float]] = []  # (i, j, weight) of every constraint, for the graph distances
 
     def run(self) -> BackEndResult:
-        for node, step in enumerate(self.keyframe_steps):
+        keyframes = enumerate(self.keyframe_steps)
+        desc = "loop closure" if self.search is not None else "pose graph"
+        for node, step in progress(keyframes, total=len(self.keyframe_steps), desc=desc, unit="keyframe"):
             motion, covariance = self._add_node(node, int(step))
             if self.search is not None:
                 self.search.add_keyframe(self.steps[int(step)].points_base, motion, covariance)
