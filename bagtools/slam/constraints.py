@@ -7,8 +7,10 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    edge counts ``loop_edge_m``): the relative pose of ``a`` and ``b`` is known
    to about ``sigma_t = drift_per_m * D`` metres and ``sigma_r =
    drift_rad_per_m * D`` radians. Older keyframes at least ``min_travel_m``
-   behind ``b`` along the path whose estimated position lies within
-   ``search_radius_m + gate_sigmas * sigma_t`` of ``b``'s are candidates.
+   behind ``b`` along the path (and far enough back in the chain that the two
+   local maps below share no keyframe: else the match only repeats the front
+   end's own chain) whose estimated position lies within ``search_radius_m +
+   gate_sigmas * sigma_t`` of ``b``'s are candidates.
    Candidates are grouped into runs of consecutive keyframes (one pass of the
    robot through the place); the nearest keyframe of each run is tried, the
    ``max_candidates`` nearest runs at most, and a run already tied to ``b`` by
@@ -108,9 +110,10 @@ class LoopOptions:
     cache_size: int = 64
 
     def __post_init__(self) -> None:
-        for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m", "drift_rad_per_m", "loop_edge_m", "angular_reach_m",
-                     "gate_sigmas", "min_window_m", "min_window_rad", "resolution_m", "max_range_m", "loop_spacing_m",
-                     "sure_sigma_m", "pair_max_path_m", "ndt_cell_m", "max_refine_m", "max_refine_rad"):
+        for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m",
+                     "drift_rad_per_m", "loop_edge_m", "angular_reach_m", "gate_sigmas", "min_window_m", "min_window_rad",
+                     "resolution_m", "max_range_m", "loop_spacing_m", "sure_sigma_m", "pair_max_path_m", "ndt_cell_m",
+                     "max_refine_m", "max_refine_rad"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
@@ -299,9 +302,8 @@ class LoopClosureSearch:
         if old.size == 0:
             return []
         dist = np.hypot(*(poses[old, :2] - poses[new, :2]).T)
-        sigma_t, _ = self.sigmas(graph_distance_m[old])
-        sigma_t_of = dict(zip(old.tolist(), sigma_t.tolist()))
-        reach = dist <= o.search_radius_m + o.gate_sigmas * sigma_t
+        sigma_t = self.sigmas(graph_distance_m)[0]
+        reach = dist <= o.search_radius_m + o.gate_sigmas * sigma_t[old]
         old, dist = old[reach], dist[reach]
         if old.size == 0:
             return []
@@ -317,7 +319,7 @@ class LoopClosureSearch:
         for _, a in picks:
             if len(chosen) == o.max_candidates:
                 break
-            if self.window((float(sigma_t_of[a]), 0.0))[0] >= o.wide_window_m:
+            if self.window((float(sigma_t[a]), 0.0))[0] >= o.wide_window_m:
                 if path[new] - self._last_wide_m < o.wide_spacing_m:
                     continue
                 self._last_wide_m = float(path[new])
