@@ -64,12 +64,13 @@ def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
     xyz = np.array([s.position_m for s in samples])
     q = np.array([s.orientation_xyzw for s in samples])
     with np.errstate(invalid="ignore", over="ignore"):
-        ok = np.isfinite(xyz).all(axis=1) & np.isfinite(q).all(axis=1) & (np.abs(np.linalg.norm(q, axis=1) - 1) < 0.01)
+        ok = (np.isfinite(xyz).all(axis=1) & (np.abs(xyz) <= 1e6).all(axis=1) & np.isfinite(q).all(axis=1)
+              & (np.abs(np.linalg.norm(q, axis=1) - 1) < 0.01))
     order = np.flatnonzero(ok)[np.argsort(stamps[ok], kind="stable")]
     order = order[np.r_[True, np.diff(stamps[order]) > 0]] if order.size else order
     if warnings is not None and order.size < len(samples):
-        warnings.append(f"{topic}: dropped {len(samples) - order.size} of {len(samples)} poses (non-finite, not a unit "
-                        "quaternion, or a repeated stamp)")
+        warnings.append(f"{topic}: dropped {len(samples) - order.size} of {len(samples)} poses (non-finite or beyond "
+                        "1e6 m, not a unit quaternion, or a repeated stamp)")
     if order.size == 0:
         return None
     T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))

@@ -29,7 +29,8 @@ def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tu
 @click.option("--reference", type=click.Choice(["previous", "keyframe"]), default="keyframe", show_default=True,
               help="Match against the previous scan, or a keyframe submap replaced after 0.5 m, 20 deg or a falling "
                    "score.")
-@click.option("--cell-size", type=float, default=1.0, show_default=True, help="NDT cell side [m].")
+@click.option("--cell-size", type=float, default=None,
+              help="NDT cell side [m]  [default: a sixth of the scans' 90th-percentile range, within 0.5..1 m]")
 @click.option("--cell-model", type=click.Choice(["widened", "paper"]), default="widened", show_default=True,
               help="NDT cell covariances: widened along walls (less drift) or as in Biber and Strasser's paper.")
 @click.option("--min-score", type=float, default=0.1, show_default=True,
@@ -41,7 +42,7 @@ def _offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tu
               help="Laser pose on the robot base [m, m, rad] when tf lacks (or has a wrong) base -> laser transform.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, reference: str,
-             cell_size: float, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,
+             cell_size: float | None, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,
              scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
     """Laser odometry of BAG: match its scans in order by 2D NDT and chain the motions.
 

@@ -106,7 +106,9 @@ class CloudMapPipeline:
             self.warnings = list(bag.warnings)
             self._load_tf(bag)
             self._map_clouds(bag)
-            self.warnings = list(dict.fromkeys(list(bag.warnings) + self.warnings + self.stream.warnings()))
+            empty = [f"{self.skipped['empty cloud']} message(s) on {self.options.topic} skipped: no valid point"] \
+                if self.skipped["empty cloud"] else []
+            self.warnings = list(dict.fromkeys(list(bag.warnings) + self.warnings + self.stream.warnings() + empty))
             if self.clouds_used == 0:
                 reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.items()) or "no messages"
                 invalid = self.buffer.invalid_note(*sorted(self.buffer.invalid_dropped))

@@ -119,7 +119,7 @@ class ScanStream:
             if reason == SKIP_BACKWARDS:
                 out.append(f"{n} scan(s) on {self.topic} skipped: header stamp not after the previous scan's "
                            f"(time going backwards), first at {self._first_backwards_ns / 1e9:.9f} s")
-            elif reason.startswith("unusable header"):
+            else:
                 out.append(f"{n} scan(s) on {self.topic} skipped: {reason}")
         for note, n in self.notes.items():
             out.append(f"{self.topic}: {note} ({n} scan(s))")
@@ -153,6 +153,7 @@ class SensorStream:
         self.scans = ScanStream(bag, topic, desc=desc) if self.is_scan else None
         self.total = bag.topics[topic].count
         self.skipped: Counter[str] = Counter()
+        self.notes: Counter[str] = Counter()
         self.implausible_points = 0
 
     def __iter__(self) -> Iterator[SensorPoints]:
@@ -173,6 +174,7 @@ class SensorStream:
                 self.skipped[f"undecodable cloud: {err.problem}"] += 1
                 continue
             self.implausible_points += cloud.n_implausible
+            self.notes.update(cloud.notes)
             yield SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points)
 
     @property
@@ -184,6 +186,7 @@ class SensorStream:
         if self.scans is not None:
             return self.scans.warnings()
         out = [f"{n} cloud(s) on {self.topic} skipped: {reason}" for reason, n in self.skipped.items()]
+        out += [f"{self.topic}: {note} ({n} cloud(s))" for note, n in self.notes.items()]
         if self.implausible_points:
             out.append(f"{self.implausible_points} point(s) on {self.topic} dropped: a coordinate beyond "
                        "1e5 m (damaged data, or is_bigendian set wrong)")

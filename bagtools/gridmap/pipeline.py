@@ -96,6 +96,9 @@ class GridMapPipeline:
             grid = self._map_scans(bag)
             self.warnings = list(dict.fromkeys(list(bag.warnings) + self.buffer.warnings + self.poses.warnings
                                                + self.scan_stream.warnings() + self.warnings))
+            if self.skipped[SKIP_NO_VALID_RANGES]:
+                self.warnings.append(f"{self.skipped[SKIP_NO_VALID_RANGES]} scan(s) on {self.options.topic} skipped: "
+                                     "no valid range")
             summary = self._summary(grid)
             summary["elapsed_s"] = round(time.perf_counter() - t0, 3)
             summary.update(self._evaluate(bag, grid))

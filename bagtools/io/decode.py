@@ -102,6 +102,10 @@ def _scan_geometry(angle_min: float, increment: float, angle_max: float, n: int,
     if n > 1 and math.isfinite(header_span) and header_span * increment < 0 and abs(header_span) > abs(increment):
         notes.append(f"angle_increment {increment:.4g} has the opposite sign of angle_max - angle_min "
                      f"({header_span:.4g}); beams placed at angle_min + i * angle_increment, as ROS defines them")
+    if n > 1 and math.isfinite(angle_max) and abs(angle_min + (n - 1) * increment - angle_max) > 2 * abs(increment) \
+            and header_span * increment >= 0:
+        notes.append(f"{n} beams at angle_increment {increment:.4g} end at {angle_min + (n - 1) * increment:.4g} rad, "
+                     f"not at angle_max {angle_max:.4g}; beams placed at angle_min + i * angle_increment")
     low = range_min if math.isfinite(range_min) and range_min > 0 else 0.0
     if not math.isfinite(range_min) or range_min < 0:
         notes.append(f"range_min {range_min:.4g} m is not a distance; returns of 0 m or less are ignored")
@@ -141,13 +145,15 @@ class CloudArrays:
     """A PointCloud2's finite x, y, z points: ``points`` (N,3) float32 in ``frame_id``.
 
     ``n_implausible`` counts finite points dropped for a coordinate beyond
-    :data:`MAX_PLAUSIBLE_COORDINATE_M` (damage, or data of the other byte order).
+    :data:`MAX_PLAUSIBLE_COORDINATE_M` (damage, or data of the other byte order);
+    ``notes`` says what in the header disagrees with the data (it was read anyway).
     """
 
     stamp_ns: int
     frame_id: str
     points: np.ndarray
     n_implausible: int = 0
+    notes: tuple[str, ...] = ()
 
 
 def _xyz_view(msg: Any) -> np.ndarray:
@@ -213,7 +219,10 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
         xyz = xyz.take(np.flatnonzero(keep), axis=0)
     with np.errstate(over="ignore"):  # with keep_nan, float64 beyond float32's range becomes inf
         points = np.asarray(xyz, dtype=np.float32)
-    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible)
+    size, expected = len(msg.data), int(msg.height) * int(msg.row_step)
+    notes = () if size == expected or int(msg.height) * int(msg.width) == 0 else (
+        f"PointCloud2 data holds {size} bytes, not height x row_step = {expected}",)
+    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible, notes)
 
 
 @dataclass(frozen=True)

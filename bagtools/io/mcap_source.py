@@ -176,6 +176,16 @@ def _summary_records(f: io.BufferedReader, size: int) -> list[object] | None:
         return None
 
 
+def _footer_summary_start(f: io.BufferedReader, size: int) -> int:
+    """The footer's summary start offset (0: no summary, or no readable footer)."""
+    try:
+        f.seek(size - len(MCAP_MAGIC) - _FOOTER_BYTES)
+        footer = next(StreamReader(f, skip_magic=True, record_size_limit=64).records)
+        return int(footer.summary_start) if isinstance(footer, Footer) else 0
+    except (*_READ_ERRORS, StopIteration):
+        return 0
+
+
 def _summary_chunk_offsets(f: io.BufferedReader, size: int) -> list[int]:
     """Chunk offsets from the summary's chunk indexes, or [] when the footer or summary is unreadable."""
     records = _summary_records(f, size) or []
@@ -186,7 +196,10 @@ def _summary_chunk_offsets(f: io.BufferedReader, size: int) -> list[int]:
 def _check_summary(f: io.BufferedReader, size: int, scan: McapScan) -> None:
     """Note (as damage) a summary that disagrees with the data: other readers trust it and would fail or lie."""
     records = _summary_records(f, size)
-    if records is None:  # no summary (allowed) or none readable: nothing to disagree with
+    if records is None:
+        if _footer_summary_start(f, size):  # the footer promises a summary that cannot be read
+            scan.damage.append("the summary section the footer points to cannot be read (other readers may fail "
+                               "on this file); the data itself was read without it")
         return
     wrong = 0
     for record in records:

@@ -276,12 +276,26 @@ def _metadata_disagreements(directory: Path, storage: list[Path], source: Any) -
     where = directory / "metadata.yaml"
     try:
         info = YAML(typ="safe", pure=True).load(where.read_bytes())["rosbag2_bagfile_information"]
+        topics = [t["topic_metadata"] for t in info.get("topics_with_message_count") or []]
         counts = {t["topic_metadata"]["name"]: int(t["message_count"]) for t in info.get("topics_with_message_count") or []}
+        types = {str(t["name"]): str(t.get("type", "")) for t in topics}
         files = [str(f) for f in info.get("relative_file_paths") or []]
         compression = (str(info.get("compression_mode") or ""), str(info.get("compression_format") or ""))
+        version = int(info.get("version", 0))
+        storage_id = str(info.get("storage_identifier", ""))
     except (YAMLError, OSError, UnicodeDecodeError, KeyError, TypeError, ValueError, AttributeError) as err:
         return [f"{where}: unreadable ({_one_line(err)}); read the storage files directly"]
     out = []
+    if not 1 <= version <= MAX_METADATA_VERSION:
+        out.append(f"{where}: version {version} is not one rosbag2 writes (1..{MAX_METADATA_VERSION}); "
+                   "read the storage files directly")
+    if storage_id and storage_id != "mcap":
+        out.append(f"{where}: says the storage is {storage_id!r}, but the files are MCAP; read them as MCAP")
+    wrong_types = [f"{name} ({types[name]} there, {info.msgtype} in the file)" for name, info in source.topics.items()
+                   if types.get(name) and types[name] != info.msgtype]
+    if wrong_types:
+        out.append(f"{where}: topic types disagree with the MCAP schemas: {', '.join(wrong_types[:3])}; "
+                   "using the file's")
     missing = [f for f in files if not (directory / f).exists()]
     if missing:
         out.append(f"{where}: lists files that are not there ({', '.join(missing[:3])}); read the storage files directly")
@@ -291,6 +305,10 @@ def _metadata_disagreements(directory: Path, storage: list[Path], source: Any) -
     if counts and sum(counts.values()) != stored:
         out.append(f"{where}: counts {sum(counts.values())} messages, the storage holds {stored}; trusting the storage")
     return out
+
+
+#: The newest rosbag2 metadata version (Rolling/Kilted write 9).
+MAX_METADATA_VERSION = 9
 
 
 def _storage_files(directory: Path) -> list[Path]:

@@ -120,6 +120,22 @@ class FrontEndOptions:
             raise ValueError("min_score and trust_score_ratio must be in [0, 1]")
 
 
+#: The scans are voxel-filtered at this share of the NDT cell size.
+VOXEL_PER_CELL = 0.2
+#: cell_size_for: the cell is this share of the 90th percentile of the ranges, within the limits.
+CELL_PER_RANGE, MIN_AUTO_CELL_M, MAX_AUTO_CELL_M = 1.0 / 6.0, 0.5, 1.0
+
+
+def cell_size_for(scans_points: list[np.ndarray]) -> float:
+    """An NDT cell size (m) suited to the scans (each (N,2) in its sensor's frame): a sixth of the 90th
+    percentile range, within 0.5 m (a small room) and 1 m (a corridor seen 20 m deep)."""
+    sample = scans_points[:: max(1, len(scans_points) // 50)]
+    ranges = np.concatenate([np.hypot(p[:, 0], p[:, 1]) for p in sample]) if sample else np.zeros(0)
+    if ranges.size == 0:
+        return MIN_AUTO_CELL_M
+    return float(np.clip(CELL_PER_RANGE * np.percentile(ranges, 90), MIN_AUTO_CELL_M, MAX_AUTO_CELL_M))
+
+
 def normalized_score(score: float, n_points: int) -> float:
     """NDT score / its maximum (4 grids x points): in [0, 1] whatever the beam count."""
     return score / (4.0 * n_points) if n_points > 0 else 0.0

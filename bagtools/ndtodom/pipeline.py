@@ -29,7 +29,7 @@ from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, TfArrays, TfCollector, decode_odometry, open_bag
 from bagtools.ndt import MIN_SCAN_POINTS
 from bagtools.ndt.grid import CELL_MODELS
-from bagtools.ndtodom.frontend import GUESSES, FrontEndOptions, LaserOdometry
+from bagtools.ndtodom.frontend import GUESSES, VOXEL_PER_CELL, FrontEndOptions, LaserOdometry, cell_size_for
 from bagtools.ndtodom.steps import FrontEndRun
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
@@ -50,7 +50,8 @@ class NdtOdomOptions:
     ``init``: the guess NDT starts from first ('auto': the odometry when the bag
     has it, else constant velocity). ``search``: allow the grid search when a
     guess cannot be trusted. ``use_odometry``: False ignores the bag's wheel
-    odometry. ``cell_size_m``: NDT cell side (m). ``cell_model``: 'widened'
+    odometry. ``cell_size_m``: NDT cell side (m), None for one suited to the
+    scans (:func:`~bagtools.ndtodom.frontend.cell_size_for`). ``cell_model``: 'widened'
     (see :mod:`bagtools.ndt.grid`) or 'paper'. ``min_score``: normalized score
     in [0, 1] below which a match falls back to its guess.
     ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
@@ -64,7 +65,7 @@ class NdtOdomOptions:
     search: bool = True
     use_odometry: bool = True
     reference: str = "keyframe"
-    cell_size_m: float = FrontEndOptions.cell_size_m
+    cell_size_m: float | None = None
     cell_model: str = "widened"
     min_score: float = 0.1
     keyframe_distance_m: float = 0.5
@@ -80,7 +81,7 @@ class NdtOdomOptions:
             raise BagtoolsError(f"--init must be one of {', '.join(INIT_MODES)}, got {self.init!r}")
         if self.reference not in REFERENCE_MODES:
             raise BagtoolsError(f"--reference must be one of {', '.join(REFERENCE_MODES)}, got {self.reference!r}")
-        if not (np.isfinite(self.cell_size_m) and self.cell_size_m > 0):
+        if self.cell_size_m is not None and not (np.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise BagtoolsError(f"--cell-size must be a positive number of metres, got {self.cell_size_m}")
         if self.cell_model not in CELL_MODELS:
             raise BagtoolsError(f"--cell-model must be one of {', '.join(CELL_MODELS)}, got {self.cell_model!r}")
@@ -98,10 +99,13 @@ class NdtOdomOptions:
         if self.max_iterations < 1:
             raise BagtoolsError(f"max_iterations must be at least 1, got {self.max_iterations}")
 
-    def front_end(self) -> FrontEndOptions:
-        """The settings of the :class:`~bagtools.ndtodom.frontend.LaserOdometry` these options ask for."""
+    def front_end(self, cell_size_m: float) -> FrontEndOptions:
+        """The settings of the :class:`~bagtools.ndtodom.frontend.LaserOdometry` these options ask for
+        (``cell_size_m`` when the options leave it to the scans)."""
+        cell = self.cell_size_m if self.cell_size_m is not None else cell_size_m
         return FrontEndOptions(init=self.init, search=self.search, reference=self.reference,
-                               cell_size_m=self.cell_size_m, cell_model=self.cell_model, min_score=self.min_score,
+                               cell_size_m=cell, voxel_m=cell * VOXEL_PER_CELL, cell_model=self.cell_model,
+                               min_score=self.min_score,
                                keyframe_distance_m=self.keyframe_distance_m, keyframe_angle_rad=self.keyframe_angle_rad,
                                keyframe_score_ratio=self.keyframe_score_ratio, max_speed_mps=self.max_speed_mps,
                                max_turn_rate_radps=self.max_turn_rate_radps, max_iterations=self.max_iterations)
@@ -151,6 +155,7 @@ class NdtOdomPipeline:
         self.odometry_source: str | None = None
         self.T_base_scan = np.eye(4)
         self.scan_frame = ""
+        self.cell_size_m: float | None = None
 
     def run(self) -> NdtOdomResult:
         with open_bag(self.bag_path) as bag:
@@ -289,7 +294,8 @@ class NdtOdomPipeline:
 
     def _register(self, stamps: np.ndarray, points: list[np.ndarray], odometry) -> LaserOdometry:
         """Every scan through the front end, points in the base frame, with the odometry pose when trusted."""
-        front = LaserOdometry(self.options.front_end())
+        self.cell_size_m = cell_size_for(points)
+        front = LaserOdometry(self.options.front_end(self.cell_size_m))
         R, t = self.T_base_scan[:2, :2], self.T_base_scan[:2, 3]
         odom_xyt = None if odometry is None else np.where(odometry[1][:, None], tform2pose(odometry[0]), np.nan)
         for k in progress(range(len(stamps)), total=len(stamps), desc="matching", unit="scan"):
@@ -361,6 +367,7 @@ class NdtOdomPipeline:
             "odometry_source": self.odometry_source,
             "T_base_scan_xyz_yaw": [*map(float, self.T_base_scan[:3, 3]), float(tform2pose(self.T_base_scan)[2])],
             "init": self.options.init,
+            "cell_size_m": self.options.cell_size_m or self.cell_size_m,
             "odometry_used": self._has_odometry(),
             "reference": self.options.reference,
             "scans_used": len(steps),
