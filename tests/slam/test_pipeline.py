@@ -117,7 +117,8 @@ def test_real_csail_log_loops_are_right(csail_odom: Path) -> None:
     accepted = [c for c in back.candidates if c.status == ACCEPTED]
     assert len(accepted) >= 100
     errors = [np.hypot(*se2_between(se2_between(truth[c.old], truth[c.new]), c.T_old_new)[:2]) for c in accepted]
-    assert max(errors) < 0.3 and np.median(errors) < 0.06
+    # no look-alike (a corridor's aliases lie a metre and more away); most within a few centimetres
+    assert max(errors) < 0.5 and np.median(errors) < 0.06 and np.percentile(errors, 90) < 0.1
 
 
 # -- bad input ----------------------------------------------------------------------------------
