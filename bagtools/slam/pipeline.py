@@ -22,9 +22,9 @@ moved into the map frame so that it starts at the first scan's pose too (as
 it): evo compares the files directly.
 
 Measured (one shared core, default options; bench/bench_slam.py): the CSAIL
-log with odometry (396 s, 406 scans, 380 m) in 17 s: APE after alignment
-8.5 cm (laser odometry alone 38 cm), mean error of the motion over 20 scans
-10.3 cm (11.3 cm), 179 loops accepted of 334 candidates; a simulated figure
+log with odometry (396 s, 406 scans, 380 m) in 17-21 s: APE after alignment
+8.3 cm (laser odometry alone 38 cm), mean error of the motion over 20 scans
+10.3 cm (11.3 cm), 173 loops accepted of 320 candidates; a simulated figure
 eight with high odometry noise (600 s): 3 mm (9 mm), the map 1.0 precision and
 0.96 recall against the true world, in 17 s; 13 500 simulated scans (2700 s)
 in 130 s.
