@@ -45,7 +45,7 @@ from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import TfBuffer
 from bagtools.tf.repair import guess_base_frame, repair_dynamic_tf
-from bagtools.trajectory import read_tum, read_tum_frames
+from bagtools.trajectory import Trajectory, read_tum, read_tum_frames
 from bagtools.transforms import pose2tform
 
 SKIP_NO_VALID_RANGES = "no valid ranges"
@@ -63,11 +63,17 @@ class GridMapResult:
 
 
 class GridMapPipeline:
-    """Builds one occupancy grid from one bag (see the module docstring)."""
+    """Builds one occupancy grid from one bag (see the module docstring).
 
-    def __init__(self, bag_path: str | Path, options: GridMapOptions) -> None:
+    ``trajectory``: poses of the robot base in ``options.frame`` computed by the
+    caller (e.g. ``bagtools slam``'s optimized trajectory), used as a TUM file
+    named by ``options.poses`` would be; ``options.poses`` then only labels them.
+    """
+
+    def __init__(self, bag_path: str | Path, options: GridMapOptions, trajectory: Trajectory | None = None) -> None:
         self.bag_path = Path(bag_path)
         self.options = options
+        self.trajectory = trajectory
         self.grid: OccupancyGrid | None = None
         self.skipped: Counter[str] = Counter()
         self.scans_total = 0
@@ -105,7 +111,7 @@ class GridMapPipeline:
         dynamic, static = read_tf_arrays(bag)
         dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
-        if self.options.poses_kind != POSES_TF:
+        if self.options.poses_kind != POSES_TF or self.trajectory is not None:
             return
         if not self.buffer.frames:
             raise BagtoolsError("bag has no /tf or /tf_static data, so scans cannot be placed in a frame "
@@ -121,20 +127,20 @@ class GridMapPipeline:
     def _pose_source(self, bag: BagReader) -> ScanPoseSource:
         opts = self.options
         offset = None if opts.scan_frame_offset is None else pose2tform(np.asarray(opts.scan_frame_offset))
-        if opts.poses_kind == POSES_TF:
+        if opts.poses_kind == POSES_TF and self.trajectory is None:
             self.base_frame = self._base_frame(bag)
             if offset is not None and not self.base_frame:
                 raise BagtoolsError("--scan-frame-offset needs the robot base frame: give --base-frame", bag.path)
             return TfScanPoses(self.buffer, opts.frame, self.base_frame, offset)
-        if opts.poses_kind == POSES_GROUND_TRUTH:
+        if opts.poses_kind == POSES_GROUND_TRUTH and self.trajectory is None:
             truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 raise BagtoolsError("--poses ground-truth needs a /ground_truth topic (written by bagtools simulate)",
                                     bag.path)
             stamps, T_map_base, self.base_frame = truth
             return TrajectoryScanPoses(stamps, T_map_base, opts.frame, self.base_frame, self.buffer, offset)
-        trajectory = read_tum(opts.poses)
-        named = read_tum_frames(opts.poses)  # what ndt-odom and slam record in their TUM files
+        trajectory = self.trajectory if self.trajectory is not None else read_tum(opts.poses)
+        named = None if self.trajectory is not None else read_tum_frames(opts.poses)  # as ndt-odom and slam write
         if named is not None and named[0] != opts.frame:
             raise BagtoolsError(f"the trajectory is in frame {named[0]!r}, not {opts.frame!r}: give --frame {named[0]}",
                                 opts.poses)
