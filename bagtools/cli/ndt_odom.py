@@ -18,6 +18,8 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 @click.option("--no-search", "no_search", is_flag=True,
               help="Never run the grid search, even when no guess can be trusted (faster, less robust).")
 @click.option("--no-odometry", "no_odometry", is_flag=True, help="Ignore the bag's wheel odometry.")
+@click.option("--holonomic", is_flag=True,
+              help="The laser is handheld or flies: its steps need not follow a wheeled robot's arcs.")
 @click.option("--reference", type=click.Choice(["previous", "keyframe"]), default="keyframe", show_default=True,
               help="Match against the previous scan, or a keyframe submap replaced after 0.5 m, 20 deg or a falling "
                    "score.")
@@ -33,7 +35,8 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 @click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
               help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, reference: str,
+def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, holonomic: bool,
+             reference: str,
              cell_size: float | None, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,
              scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
     """Laser odometry of BAG: match its scans in order by 2D NDT and chain the motions.
@@ -65,7 +68,7 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
 
     options = NdtOdomOptions(topic=topic, init=init, search=not no_search, use_odometry=not no_odometry,
                              reference=reference, cell_size_m=cell_size, cell_model=cell_model, min_score=min_score,
-                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate,
+                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate, wheeled=not holonomic,
                              scan_frame_offset=scan_frame_offset)
     result = NdtOdomPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):

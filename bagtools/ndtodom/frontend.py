@@ -67,6 +67,8 @@ OUTLIER_COST = 0.3
 CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.08
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
 PRIOR_GATE2 = 14.0
+#: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
+LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
@@ -80,7 +82,9 @@ class FrontEndOptions:
 
     ``init``: which guess NDT starts from first ("auto": odometry when given,
     else constant velocity). ``search``: allow the grid search. ``reference``:
-    "keyframe" or "previous" (every scan is a keyframe).
+    "keyframe" or "previous" (every scan is a keyframe). ``wheeled``: the scans
+    ride on a wheeled robot, whose steps run along arcs (False for a handheld
+    or flying laser, which can move sideways).
     """
 
     init: str = "auto"
@@ -103,6 +107,7 @@ class FrontEndOptions:
     submap_keyframes: int = 5
     prior_weight: float = PRIOR_WEIGHT_DEFAULT
     voxel_m: float = 0.2
+    wheeled: bool = True
     max_iterations: int = 100
 
     def __post_init__(self) -> None:
@@ -177,6 +182,11 @@ class _Prior:
     cheaper of the two explanations, the wide one paying OUTLIER_COST (in
     normalized score) for its rarity: the scans must be that much better
     aligned to overrule the odometry.
+
+    With ``origin`` (the previous scan's pose, same frame), a wheeled robot's
+    motion model adds its cost: a step from ``origin`` runs along an arc, so
+    its sideways offset from the chord at half its turn is unlikely (see
+    LATERAL_SD_M). Odometry's steps follow an arc already and have no origin.
     """
 
     mean: np.ndarray
@@ -185,10 +195,18 @@ class _Prior:
     wide: _Prior | None = None
     outlier_cost: float = 0.0
     kind: str = "kinematic"
+    origin: np.ndarray | None = None
 
     def mahalanobis2(self, pose: np.ndarray) -> float:
         d = _between(self.mean, pose)
-        return float(np.sum((d / self.sd) ** 2))
+        cost = float((d[0] / self.sd[0]) ** 2 + (d[1] / self.sd[1]) ** 2 + (d[2] / self.sd[2]) ** 2)
+        if self.origin is not None:
+            step = _between(self.origin, pose)
+            half = 0.5 * step[2]
+            sideways = step[1] * math.cos(half) - step[0] * math.sin(half)
+            sd = LATERAL_SD_M + LATERAL_SD_RATIO * math.hypot(step[0], step[1])
+            cost += (sideways / sd) ** 2
+        return cost
 
     def cost(self, pose: np.ndarray) -> float:
         """-2 log of the prior density relative to its peak (squared Mahalanobis for one Gaussian)."""
@@ -338,8 +356,9 @@ class LaserOdometry:
         motion = _between(last_pose, guesses["constant-velocity"])
         sd_xy = CV_NOISE_M + 0.5 * opts.max_accel_mps2 * dt * dt + CV_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
+        origin = _between(kf.pose, last_pose) if opts.wheeled else None
         kinematic = _Prior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
-                           opts.prior_weight)
+                           opts.prior_weight, origin=origin)
         if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
             return kinematic
         if "odom" not in guesses:
@@ -348,7 +367,8 @@ class LaserOdometry:
             sd_xy = CV_STEADY_M + CV_STEADY_RATIO * float(np.hypot(motion[0], motion[1]))
             sd_theta = CV_STEADY_RAD + CV_STEADY_RATIO * abs(float(motion[2]))
             return _Prior(kinematic.mean, np.minimum(np.array([sd_xy, sd_xy, sd_theta]), kinematic.sd),
-                          opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity")
+                          opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity",
+                          origin=origin)
         motion = _between(last_pose, guesses["odom"])
         sd_xy = ODOM_NOISE_M + ODOM_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))

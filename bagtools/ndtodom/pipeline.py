@@ -57,7 +57,8 @@ class NdtOdomOptions:
     ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
     overriding (or standing in for) tf. ``max_speed_mps`` and
     ``max_turn_rate_radps``: what the robot can do (bounds constant velocity
-    and the search).
+    and the search). ``wheeled``: False for a handheld or flying laser (its
+    steps need not run along arcs, see :class:`~bagtools.ndtodom.frontend.FrontEndOptions`).
     """
 
     topic: str = "/scan"
@@ -74,6 +75,7 @@ class NdtOdomOptions:
     scan_frame_offset: tuple[float, float, float] | None = None
     max_speed_mps: float = FrontEndOptions.max_speed_mps
     max_turn_rate_radps: float = FrontEndOptions.max_turn_rate_radps
+    wheeled: bool = True
     max_iterations: int = 100
 
     def __post_init__(self) -> None:
@@ -108,7 +110,8 @@ class NdtOdomOptions:
                                min_score=self.min_score,
                                keyframe_distance_m=self.keyframe_distance_m, keyframe_angle_rad=self.keyframe_angle_rad,
                                keyframe_score_ratio=self.keyframe_score_ratio, max_speed_mps=self.max_speed_mps,
-                               max_turn_rate_radps=self.max_turn_rate_radps, max_iterations=self.max_iterations)
+                               max_turn_rate_radps=self.max_turn_rate_radps, wheeled=self.wheeled,
+                               max_iterations=self.max_iterations)
 
 
 @dataclass
