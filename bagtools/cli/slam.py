@@ -19,7 +19,7 @@ import click
 @click.option("--no-odometry", is_flag=True, help="Ignore the bag's wheel odometry (/odom, tf): scans only.")
 @click.option("--max-range", type=float, default=None,
               help="Use returns up to this range [m] (map and loop closure); farther ones only clear free space. "
-                   "[default: the scans' range_max in the map, 20 m for loop closure]")
+                   "[default: 20 m]")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
          no_loop_closure: bool, no_odometry: bool, max_range: float | None, force: bool) -> None:

@@ -59,6 +59,11 @@ from bagtools.transforms import pose2tform, se2_between, se2_compose, wrap_to_pi
 SLAM_FRAME = "slam_map"
 
 
+#: Returns farther than this only clear free space in the map, unless --max-range says otherwise (metres): a
+#: no-return beam of a long-range laser (CSAIL's 81.9 m) would otherwise sweep the whole map.
+MAP_MAX_RANGE_M = 20.0
+
+
 @dataclass(frozen=True)
 class SlamOptions:
     """How to run SLAM (the CLI's options).
@@ -68,8 +73,8 @@ class SlamOptions:
     ``resolution_m``: side of a map cell, metres (the ``grid`` command's
     ``--resolution`` is cells per metre instead). ``max_range_m``: returns
     farther than this are not used, neither in the map (they only clear free
-    space up to it) nor for loop closure (None: the scans' range_max in the map,
-    ``loop_max_range_m`` for loops). ``loop_search_radius_m``: how far apart
+    space up to it) nor for loop closure (None: MAP_MAX_RANGE_M, 20 m, in the
+    map, as slam_toolbox's max_laser_range; ``loop_max_range_m`` for loops). ``loop_search_radius_m``: how far apart
     two keyframes may be (beyond their estimated uncertainty) to be matched for
     a loop. ``loop_closure``: False keeps the front end's trajectory (the graph
     is the odometry chain). ``loop_min_score``: correlative score (in [0, 1])
@@ -221,7 +226,7 @@ class SlamPipeline:
         """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of)."""
         o = self.options
         options = GridMapOptions(topic=o.topic, frame=SLAM_FRAME, poses="slam trajectory", resolution=1.0 / o.resolution_m,
-                                 max_range_m=o.max_range_m, base_frame=base_frame)
+                                 max_range_m=o.max_range_m or MAP_MAX_RANGE_M, base_frame=base_frame)
         result = GridMapPipeline(self.bag_path, options, trajectory=trajectory).run()
         self.warnings.extend(w for w in result.summary.get("warnings", []) if w not in self.warnings)
         summary = {k: v for k, v in result.summary.items() if k not in ("options", "warnings", "bag", "poses")}
