@@ -50,7 +50,8 @@ class LaserScanArrays:
     between scans of the same geometry); ``range_min_m`` and ``range_max_m``
     are the message's limits made sane (at least 0, at most
     :data:`MAX_PLAUSIBLE_RANGE_M`); ``valid`` (N,) bool: finite, above 0 and
-    within them. ``notes`` says what in the header was implausible and how it
+    within them. ``angle_increment_rad``, ``time_increment_s`` and ``scan_time_s``
+    are the message's. ``notes`` says what in the header was implausible and how it
     was read (empty for a sound scan); the same notes come back for every scan
     of one geometry, so callers can count them.
     """
@@ -63,6 +64,9 @@ class LaserScanArrays:
     range_max_m: float
     intensities: np.ndarray
     notes: tuple[str, ...] = ()
+    angle_increment_rad: float = 0.0
+    time_increment_s: float = 0.0
+    scan_time_s: float = 0.0
 
     @property
     def valid(self) -> np.ndarray:
@@ -137,6 +141,9 @@ def decode_laserscan(msg: Any) -> LaserScanArrays:
         range_max_m=high,
         intensities=np.asarray(msg.intensities, dtype=np.float32),
         notes=notes,
+        angle_increment_rad=float(msg.angle_increment),
+        time_increment_s=float(msg.time_increment),
+        scan_time_s=float(msg.scan_time),
     )
 
 
