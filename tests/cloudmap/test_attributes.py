@@ -149,7 +149,7 @@ def test_map_cloud_keeps_intensity_and_colour_averaged_per_voxel(colour_bag: Pat
 
     out = tmp_path / "map"
     result = subprocess.run([sys.executable, "-m", "bagtools", "map-cloud", str(colour_bag), "--out", str(out),
-                             "--topic", "/points", "--sample", "1", "--voxel", "0.5"],
+                             "--topic", "/points", "--sample", "1", "--voxel", "0.5", "--no-mcap"],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     t = o3d.t.io.read_point_cloud(str(out / "cloud_map.pcd"))
