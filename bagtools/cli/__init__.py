@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "map-cloud": "bagtools.cli.map_cloud:map_cloud",
     "ndt-odom": "bagtools.cli.ndt_odom:ndt_odom",
     "grid": "bagtools.cli.grid:grid",
+    "export": "bagtools.cli.export:export",
 }
 
 
