@@ -69,5 +69,5 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
                 raise BagtoolsError(f"no message on {topic} could be read, so there is nothing to export", bag.path)
         summary.warnings = list(bag.warnings) + [
             f"{n} message(s) on {topic} lack the column {name} of the first; left empty"
-            for name, n in getattr(sink, "_columns").filled.items()]
+            for name, n in sink.columns.filled.items()]
     return summary

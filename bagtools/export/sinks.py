@@ -216,6 +216,36 @@ def _numpy_column(parts: list[np.ndarray]) -> np.ndarray:
     return column.astype(str) if column.dtype == object else column
 
 
-def open_sink(path: Path, fmt: str) -> Sink:
-    """The sink writing ``fmt`` ('csv', 'parquet' or 'npz') to ``path``."""
-    return {"csv": CsvSink, "parquet": ParquetSink, "npz": NpzSink}[fmt](path)
+class Batched:
+    """Gathers small chunks (a message's row or few) into batches of about ``rows`` rows before a sink writes them:
+    the per-call cost of the sinks is paid once per batch, not once per message."""
+
+    def __init__(self, sink: Sink, rows: int = 8192) -> None:
+        self.sink = sink
+        self.rows = rows
+        self.columns = _Columns()
+        self._pending: list[Chunk] = []
+        self._count = 0
+
+    def write(self, chunk: Chunk) -> None:
+        self._pending.append(self.columns.conform(chunk))
+        self._count += _rows(chunk)
+        if self._count >= self.rows:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            names = list(self._pending[0])
+            self.sink.write({name: np.concatenate([c[name] for c in self._pending]) for name in names})
+        self._pending, self._count = [], 0
+
+    def close(self) -> None:
+        try:
+            self._flush()
+        finally:
+            self.sink.close()
+
+
+def open_sink(path: Path, fmt: str) -> Batched:
+    """The sink writing ``fmt`` ('csv', 'parquet' or 'npz') to ``path``, batched."""
+    return Batched({"csv": CsvSink, "parquet": ParquetSink, "npz": NpzSink}[fmt](path))
