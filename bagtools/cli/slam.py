@@ -20,9 +20,10 @@ import click
 @click.option("--max-range", type=float, default=None,
               help="Use returns up to this range [m] (map and loop closure); farther ones only clear free space. "
                    "[default: 20 m]")
+@click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, paths, scans and loops for Foxglove).")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
-         no_loop_closure: bool, no_odometry: bool, max_range: float | None, force: bool) -> None:
+         no_loop_closure: bool, no_odometry: bool, max_range: float | None, no_mcap: bool, force: bool) -> None:
     """SLAM of BAG's laser scans: laser odometry, loop closures, a pose graph optimized with GTSAM, the map.
 
     Writes OUT/trajectory.tum (the optimized robot base pose at every scan, in
@@ -31,7 +32,9 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     map_server format), map.png (the map, the trajectory and the loop
     closures), summary.json (keyframes, loop candidates accepted and rejected by
     reason, optimization, timing, and for bags with /ground_truth the errors of
-    SLAM and of the laser odometry) and ground_truth.tum (bags with /ground_truth).
+    SLAM and of the laser odometry), ground_truth.tum (bags with /ground_truth)
+    and results.mcap (/map, the paths, /tf, the scans and /loop_closures, to
+    open in Foxglove or replay for RViz).
 
     \b
     Example:
@@ -46,11 +49,11 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
 
     options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
                           loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
-                          loop_min_score=loop_min_score)
+                          loop_min_score=loop_min_score, keep_scans=not no_mcap)
     result = SlamPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
-    written = write_slam(result, out_dir, force)
+    written = write_slam(result, out_dir, force, mcap=not no_mcap)
     s = result.summary
     loops = s["loop_closure"]
     reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())

@@ -78,7 +78,8 @@ class SlamOptions:
     two keyframes may be (beyond their estimated uncertainty) to be matched for
     a loop. ``loop_closure``: False keeps the front end's trajectory (the graph
     is the odometry chain). ``loop_min_score``: correlative score (in [0, 1])
-    a loop match needs.
+    a loop match needs. ``keep_scans``: keep the input scans in the result
+    (``SlamResult.front_end.scans``), for results.mcap.
     """
 
     topic: str = "/scan"
@@ -90,6 +91,7 @@ class SlamOptions:
     loop_min_score: float = 0.5
     loop_max_range_m: float = 20.0
     loop_kernel: str = "huber"
+    keep_scans: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution_m) and 1.0 / MAX_RESOLUTION <= self.resolution_m <= 1.0 / MIN_RESOLUTION):
@@ -122,8 +124,10 @@ FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 
 
 def laser_odometry(bag_path: Path, options: SlamOptions) -> NdtOdomResult:
-    """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting."""
-    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry))
+    """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting
+    (keeping the scans when results.mcap will replay them)."""
+    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry),
+                         keep_scans=options.keep_scans)
 
 
 @dataclass
@@ -134,7 +138,8 @@ class SlamResult:
     ``ground_truth``: /ground_truth in the map frame (None without it);
     ``grid``: the occupancy grid; ``back_end``: the graph and the loop
     candidates; ``loop_segments`` (L,2,2): the accepted loops' keyframe
-    positions [[x_old, y_old], [x_new, y_new]] (m); ``summary``: summary.json.
+    positions [[x_old, y_old], [x_new, y_new]] (m); ``summary``: summary.json;
+    ``front_end``: the laser odometry's result (its scans when kept, the laser mount).
     """
 
     trajectory: Trajectory
@@ -144,6 +149,7 @@ class SlamResult:
     back_end: BackEndResult
     loop_segments: np.ndarray
     summary: dict = field(default_factory=dict)
+    front_end: NdtOdomResult | None = None
 
 
 class SlamPipeline:
@@ -174,7 +180,7 @@ class SlamPipeline:
         self.timing_s["total"] = time.perf_counter() - t0
         loops = self._loop_segments(back)
         summary = self._summary(result, back, map_summary, evaluation)
-        return SlamResult(trajectory, odometry, ground_truth, grid, back, loops, summary)
+        return SlamResult(trajectory, odometry, ground_truth, grid, back, loops, summary, result)
 
     def _timed(self, name: str, fn: Callable):
         t0 = time.perf_counter()

@@ -91,7 +91,7 @@ def test_accumulator_with_voxel_stays_bounded() -> None:
     rng = np.random.default_rng(0)
     for _ in range(50):  # 250k points inside a 2 m cube: at most 5^3 voxels (grid anchored at the min bound)
         acc.add(rng.uniform(0, 2, size=(5000, 3)).astype(np.float32))
-        assert sum(p.shape[0] for p in acc._parts) <= 10_000 + 5000 + 125
+        assert sum(len(p) for p in acc._parts) <= 10_000 + 5000 + 125
     assert acc.points().shape[0] <= 125 and acc.points_added == 250_000
 
 

@@ -65,7 +65,7 @@ def test_end_to_end_with_and_without_odometry(tmp_path: Path) -> None:
     assert "scans," in done.stdout and "keyframes;" in done.stdout and "SLAM: APE" in done.stdout
     assert sorted(p.name for p in out.iterdir()) == sorted(
         ["trajectory.tum", "odometry.tum", "ground_truth.tum", "pose_graph.g2o", "map.pgm", "map.yaml", "map.png",
-         "summary.json"])
+         "summary.json", "results.mcap"])
     summary = json.loads((out / "summary.json").read_text())
     assert summary["front_end"]["odometry_used"] and summary["errors_slam"]["ape_aligned_m"]["rmse"] < 0.05
     forced = _run("slam", str(bag), "--out", str(out), "--no-odometry", "--no-loop-closure", "--max-range", "3",
