@@ -23,17 +23,16 @@ from pathlib import Path
 from types import TracebackType
 from typing import BinaryIO
 
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from bagtools.errors import BagtoolsError
+from simulate.writer.mcap_file import McapFileWriter
 from simulate.writer.metadata import BagInfo, OfferedQos, TopicInfo, metadata_yaml, qos_string, serialized_metadata
 
 ROS_DISTROS = {"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}
 DEFAULT_ROS_DISTRO = "humble"
-MCAP_LIBRARY = "bagtools simulate (mcap-python writer)"
+MCAP_LIBRARY = "bagtools simulate"
 
 _SENSOR = OfferedQos(reliable=False, transient_local=False)  # rclcpp's SensorDataQoS
 _RELIABLE = OfferedQos(reliable=True, transient_local=False)
@@ -93,7 +92,7 @@ class SimBagWriter:
         self.counts: dict[str, int] = {t: 0 for t in topics}
         self.type_hashes = {t: self.typestore.hash_rihs01(TOPICS[t][0]) for t in topics}
         self._stream: BinaryIO | None = None
-        self._mcap: McapWriter | None = None
+        self._mcap: McapFileWriter | None = None
         self._channels: dict[str, int] = {}
         self._first_log_ns: int | None = None
         self._last_log_ns = -1
@@ -101,8 +100,7 @@ class SimBagWriter:
     def __enter__(self) -> SimBagWriter:
         self.path.mkdir(mode=0o755, parents=True)
         self._stream = (self.path / self.file_name).open("xb")
-        self._mcap = McapWriter(self._stream, compression=CompressionType.ZSTD, enable_crcs=True)
-        self._mcap.start(profile="ros2", library=MCAP_LIBRARY)
+        self._mcap = McapFileWriter(self._stream, profile="ros2", library=MCAP_LIBRARY)
         schemas: dict[str, int] = {}
         for topic in self.topics:
             msgtype, offered = TOPICS[topic]
@@ -123,7 +121,7 @@ class SimBagWriter:
         if self._first_log_ns is None:
             self._first_log_ns = log_time_ns
         self._last_log_ns = log_time_ns
-        self._mcap.add_message(self._channels[topic], log_time_ns, data, log_time_ns, 0)
+        self._mcap.add_message(self._channels[topic], log_time_ns, data)
         self.counts[topic] += 1
 
     def bag_info(self) -> BagInfo:
