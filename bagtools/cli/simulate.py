@@ -20,7 +20,7 @@ import click
 @click.option("--no-cloud", is_flag=True, help="Do not simulate the depth camera.")
 @click.option("--ros-distro", type=click.Choice(["humble", "jazzy"]), default="humble", show_default=True,
               help="Write the bag as this distro's rosbag2 does. humble: metadata version 5, which Humble and "
-                   "Jazzy both read; jazzy: version 9 exactly as Jazzy writes it, which Humble cannot open.")
+                   "Jazzy both read; jazzy: version 9 as Jazzy writes it, which Humble cannot open.")
 @click.option("--world", default="turtlebot3_world", show_default=True, help="Packaged world name or a world JSON file.")
 @click.option("--force", is_flag=True, help="Overwrite OUT if it exists.")
 def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, max_linear: float, max_angular: float,
@@ -33,7 +33,7 @@ def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, 
     Waffle's robot_state_publisher gives (ROBOTIS' URDF).
 
     The default bag (--ros-distro humble) opens in Humble and in Jazzy; use --ros-distro
-    jazzy for exactly what Jazzy records (Humble's rosbag2 rejects its metadata).
+    jazzy for the metadata Jazzy writes (Humble's rosbag2 rejects it).
 
     \b
     Example:

@@ -55,9 +55,6 @@ class Joint:
         return T
 
 
-# Backwards-compatible name: a fixed joint is the static transform T_parent_child.
-StaticTransform = Joint
-
 _OPTICAL_RPY = (-1.57, 0.0, -1.57)  # as in the URDF: z forward, x right, y down
 JOINTS: tuple[Joint, ...] = (
     Joint("base_joint", "fixed", "base_footprint", "base_link", (0.0, 0.0, 0.010)),

@@ -4,17 +4,18 @@ Every ``--ros-distro`` gives a bag its own rosbag2 reads (see :mod:`simulate.wri
 
 - ``humble`` (the default): metadata version 5, which Humble *and* Jazzy read (Jazzy reads
   every version from 4 on). Channel QoS strings use Humble's numbered policies.
-- ``jazzy``: exactly what Jazzy writes, metadata version 9 (QoS as a YAML list of named
+- ``jazzy``: the metadata exactly as Jazzy writes it, version 9 (QoS as a YAML list of named
   policies, ``type_description_hash``, ``ros_distro: jazzy``), which Humble cannot open.
 
-The MCAP file is what rosbag2's MCAP storage plugin writes with zstd chunk compression (its
-``zstd_small`` preset): profile ``ros2``, one ``ros2msg`` schema per type (the concatenated
-message definitions), one ``cdr`` channel per topic whose metadata holds
-``offered_qos_profiles`` and ``topic_type_hash`` (the RIHS01 hash of REP 2011, as Jazzy's plugin
-stores it; Humble's plugin ignores the key), a CRC-32 on every chunk and on the summary, and a
+The MCAP file has the layout of rosbag2's MCAP storage plugin: profile ``ros2``, one ``ros2msg``
+schema per type (the concatenated message definitions), one ``cdr`` channel per topic whose
+metadata holds ``offered_qos_profiles`` and ``topic_type_hash`` (the RIHS01 hash of REP 2011,
+as Jazzy's plugin stores it; Humble's plugin ignores the key), message indexes, and a
 ``rosbag2`` metadata record with the bag's ``serialized_metadata`` (plus ``ROS_DISTRO``, which
-newer readers take from Humble-era files). Message log time is the receive time and publish
-time equals it, as rosbag2 records them.
+newer readers take from Humble-era files). Chunks are zstd-compressed and every chunk and the
+summary carry a CRC-32, as libmcap writes them by default and rosbag2 does when its storage
+config says ``compression: Zstd`` and ``noChunkCRC: false`` (out of the box rosbag2 writes
+uncompressed chunks without CRCs; readers accept both). Message log time is the receive time and publish time equals it.
 """
 
 from __future__ import annotations

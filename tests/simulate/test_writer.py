@@ -183,3 +183,27 @@ def test_fixed_layout_refuses_a_layout_that_depends_on_values():
 
     with pytest.raises(ValueError, match="fixed layout"):
         FixedLayout.probe(serialize, {"x": "f8"})
+
+
+def test_bagtools_reports_a_chunk_whose_crc_does_not_match_as_damage(tmp_path):
+    fixture = Path(__file__).resolve().parents[2] / "fixtures" / "sim_random_nocloud_20s"
+    src = mcap_file(fixture)
+    with src.open("rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert len(chunks) > 2
+    chunk = chunks[1]
+    data = bytearray(src.read_bytes())
+    crc_at = chunk.chunk_start_offset + 1 + 8 + 8 + 8 + 8  # opcode, length, start, end, uncompressed size
+    (crc,) = struct.unpack_from("<I", data, crc_at)
+    assert crc != 0
+    struct.pack_into("<I", data, crc_at, crc ^ 0x00010000)
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / src.name).write_bytes(bytes(data))
+    (bag / "metadata.yaml").write_text((fixture / "metadata.yaml").read_text())
+    with open_bag(bag) as reader:
+        n = sum(1 for _ in reader.raw_messages())
+        warnings = list(reader.warnings)
+    assert any("damaged MCAP" in w and "checksum mismatch" in w for w in warnings), warnings
+    with src.open("rb") as f:
+        assert 0 < n < sum(1 for _ in make_reader(f).iter_messages())
