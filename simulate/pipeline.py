@@ -49,6 +49,7 @@ CLOUD_TOPIC = "/camera/depth/points"
 CAMERA_INFO_TOPIC = "/camera/depth/camera_info"
 CLOUD_FRAME = "camera_depth_optical_frame"  # as Gazebo's depth plugin publishes the R200's cloud
 IMU_FRAME = "imu_link"
+BATCH_BLOCK = 4096  # messages serialized at once per fixed-layout stream (bounds memory on long runs)
 
 
 @dataclass(frozen=True)
@@ -159,10 +160,10 @@ def _latency_ns(rng: np.random.Generator, kind: str, n: int) -> np.ndarray:
 class _BagSimulation:
     """One bag's messages: when each is stamped and logged, and how it is built.
 
-    The random streams are drawn in a fixed order (AMCL estimates, clicks, IMU noise,
-    latencies, then scan and cloud noise in bag order), so the same configuration gives the
+    The random streams are drawn in a fixed order (AMCL estimates, clicks, latencies, then scan and cloud noise in bag order), so the same configuration gives the
     same bytes. The fixed-layout streams (odometry, tf, joint states, IMU) are serialized in
-    batches by ``prepare``; scans and clouds are simulated as they are written.
+    blocks of ``BATCH_BLOCK`` messages as the writing reaches them (IMU noise is drawn block by
+    block); scans and clouds are simulated one by one.
     """
 
     def __init__(self, config: SimConfig, world: World, traj: Trajectory, rngs: dict[str, np.random.Generator]) -> None:
@@ -192,14 +193,13 @@ class _BagSimulation:
         self.imu = Imu()
         n_imu = int((step_ns[-1] - self.t0) * self.imu.rate_hz // 1_000_000_000) + 1
         self.imu_ns = self.t0 + (np.arange(n_imu, dtype=np.int64) * 1_000_000_000) // int(self.imu.rate_hz)
-        self.imu_samples = self.imu.samples(motion, (self.imu_ns - self.t0) / 1e9, rngs["imu"])
         # Twists over the step that ended at each stamp.
         self.v_true, self.w_true = _previous_step(motion.v_mps), _previous_step(motion.w_radps)
         self.v_odom, self.w_odom = _previous_step(odom.v_mps), _previous_step(odom.w_radps)
         # Wheel joints: the encoder angles the odometry integrated, and their rates over the last step.
         self.wheel_rad = np.column_stack([odom.wheel_left_rad, odom.wheel_right_rad])
         self.wheel_radps = np.vstack([np.zeros((1, 2)), np.diff(self.wheel_rad, axis=0) / motion.dt_s])
-        self._batches: dict[str, np.ndarray] = {}
+        self._blocks: dict[str, tuple[int, np.ndarray]] = {}
 
     @property
     def topics(self) -> list[str]:
@@ -237,31 +237,45 @@ class _BagSimulation:
         order = np.lexsort((index, kind, log_ns))
         return [name for name, _ in streams], kind[order], index[order], log_ns[order]
 
-    def prepare(self, mb: MessageBuilder) -> None:
-        """Serialize the fixed-layout streams at once (before the messages are written)."""
+    def _batch(self, mb: MessageBuilder, name: str, j: int) -> bytes:
+        """Message ``j`` of a fixed-layout stream, serialized with its block of ``BATCH_BLOCK`` neighbours."""
+        block = j // BATCH_BLOCK
+        cached = self._blocks.get(name)
+        if cached is None or cached[0] != block:
+            if name == "imu" and block != (cached[0] + 1 if cached else 0):
+                raise ValueError("IMU blocks must be built in order (their noise is drawn block by block)")
+            cached = (block, self._serialize_block(mb, name, slice(block * BATCH_BLOCK, (block + 1) * BATCH_BLOCK)))
+            self._blocks[name] = cached
+        return cached[1][j - block * BATCH_BLOCK].tobytes()
+
+    def _serialize_block(self, mb: MessageBuilder, name: str, sl: slice) -> np.ndarray:
         step_ns, odom, motion = self.traj.step_ns, self.traj.odometry, self.traj.motion
-        wheels = WHEEL_JOINT_MODELS
-        n = len(step_ns)
-        xyz = np.broadcast_to(np.array([j.xyz_m for j in wheels]), (n, len(wheels), 3))
-        quats = np.stack([wheel_quats_xyzw(j, self.wheel_rad[:, i]) for i, j in enumerate(wheels)], axis=1)
-        imu, samples = self.imu, self.imu_samples
-        self._batches = {
-            "tf_odom": mb.planar_tf_batch(step_ns, "odom", "base_footprint", odom.poses),
-            "odom": mb.odometry_batch(step_ns, "odom", "base_footprint", odom.poses, self.v_odom, self.w_odom),
-            "truth": mb.odometry_batch(step_ns, "map", "base_footprint", motion.poses, self.v_true, self.w_true,
-                                       truth=True),
-            "joints": mb.joint_state_batch(step_ns, WHEEL_JOINTS, self.wheel_rad, self.wheel_radps),
-            "tf_wheels": mb.transforms_batch(step_ns, tuple((j.parent, j.child) for j in wheels), xyz, quats),
-            "imu": mb.imu_batch(self.imu_ns, IMU_FRAME, samples.quat_xyzw, samples.angular_velocity_radps,
-                                samples.linear_acceleration_mps2,
-                                (imu.orientation_covariance, imu.angular_velocity_covariance,
-                                 imu.linear_acceleration_covariance)),
-        }
+        if name == "tf_odom":
+            return mb.planar_tf_batch(step_ns[sl], "odom", "base_footprint", odom.poses[sl])
+        if name == "odom":
+            return mb.odometry_batch(step_ns[sl], "odom", "base_footprint", odom.poses[sl], self.v_odom[sl],
+                                     self.w_odom[sl])
+        if name == "truth":
+            return mb.odometry_batch(step_ns[sl], "map", "base_footprint", motion.poses[sl], self.v_true[sl],
+                                     self.w_true[sl], truth=True)
+        if name == "joints":
+            return mb.joint_state_batch(step_ns[sl], WHEEL_JOINTS, self.wheel_rad[sl], self.wheel_radps[sl])
+        if name == "tf_wheels":
+            wheel_rad = self.wheel_rad[sl]
+            xyz = np.broadcast_to(np.array([j.xyz_m for j in WHEEL_JOINT_MODELS]), (len(wheel_rad), 2, 3))
+            quats = np.stack([wheel_quats_xyzw(j, wheel_rad[:, i]) for i, j in enumerate(WHEEL_JOINT_MODELS)], axis=1)
+            return mb.transforms_batch(step_ns[sl], tuple((j.parent, j.child) for j in WHEEL_JOINT_MODELS), xyz, quats)
+        imu = self.imu  # name == "imu"
+        samples = imu.samples(motion, (self.imu_ns[sl] - self.t0) / 1e9, self.rngs["imu"])
+        return mb.imu_batch(self.imu_ns[sl], IMU_FRAME, samples.quat_xyzw, samples.angular_velocity_radps,
+                            samples.linear_acceleration_mps2,
+                            (imu.orientation_covariance, imu.angular_velocity_covariance,
+                             imu.linear_acceleration_covariance))
 
     def message(self, mb: MessageBuilder, name: str, j: int) -> tuple[str, bytes]:
         """(topic, serialized message) number ``j`` of stream ``name``."""
-        if name in self._batches:
-            return _BATCH_TOPICS[name], self._batches[name][j].tobytes()
+        if name in _BATCH_TOPICS:
+            return _BATCH_TOPICS[name], self._batch(mb, name, j)
         if name == "world":
             return WORLD_TOPIC, mb.string(self.world_json)
         if name == "robot_description":
@@ -282,7 +296,7 @@ class _BagSimulation:
             return CAMERA_INFO_TOPIC, mb.camera_info(int(self.cloud_ns[j]), CLOUD_FRAME, cam.width, cam.height, cam.K, cam.P)
         if name == "click":
             return "/clicked_point", mb.point_stamped(int(self.click_ns[j]), "map", self.click_points[j])
-        raise ValueError(f"unknown stream {name!r} (batches not prepared?)")
+        raise ValueError(f"unknown stream {name!r}")
 
     def _scan(self, mb: MessageBuilder, j: int) -> bytes:
         T_map_scan = pose2tform(self.traj.motion.poses[self.scan_steps[j]]) @ self.T_base_scan
@@ -318,7 +332,6 @@ def simulate_bag(out_path: str | Path, config: SimConfig, force: bool = False) -
     names, kinds, indices, log_ns = sim.schedule()
     with atomic_path(out_path, force, is_rosbag2_output) as staged, SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
         mb = MessageBuilder(bag.typestore)
-        sim.prepare(mb)
         with progress_bar(total=round(config.duration_s, 3), desc="simulate", unit="s") as bar:
             shown_s = 0.0
             for k, j, t_log in zip(kinds.tolist(), indices.tolist(), log_ns.tolist()):
