@@ -132,8 +132,9 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
     repeated = rows[np.flatnonzero(stamps_ns[rows][1:] == stamps_ns[rows][:-1]) + 1]
     if repeated.size:
         first = np.searchsorted(stamps_ns, stamps_ns[repeated], side="left")
-        differ = (np.linalg.norm(translation[repeated] - translation[first], axis=1) > 1e-6) | (
-            _angle_between(_unit(rotation_xyzw[repeated]), _unit(rotation_xyzw[first])) > 1e-6)
+        with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: not equal either
+            differ = ~(np.linalg.norm(translation[repeated] - translation[first], axis=1) <= 1e-6) | (
+                _angle_between(_unit(rotation_xyzw[repeated]), _unit(rotation_xyzw[first])) > 1e-6)
         found.repeated, found.conflicting = int(repeated.size), int(differ.sum())
         rows = np.setdiff1d(rows, repeated)
     if rows.size >= 5:
