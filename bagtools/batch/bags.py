@@ -38,7 +38,7 @@ def is_rosbag2_dir(path: Path) -> bool:
 
 
 def _walk(directory: Path, skip: set[Path]) -> Iterable[Path]:
-    """Bags inside ``directory`` (not itself a bag), depth first in name order."""
+    """Bags inside ``directory`` (not itself a bag)."""
     for root, dirs, files in os.walk(directory):
         root_path = Path(root)
         dirs.sort()
@@ -60,7 +60,7 @@ def _walk(directory: Path, skip: set[Path]) -> Iterable[Path]:
 def _expand(path: Path, explicit: bool, skip: set[Path]) -> list[Path]:
     """The bags ``path`` stands for; ``explicit`` paths name a bag even when they do not look like one."""
     if path.is_dir() and not is_rosbag2_dir(path):
-        return list(_walk(path, skip))
+        return sorted(_walk(path, skip))
     if path.name == "metadata.yaml":
         return [path.parent]
     if path.is_dir() or explicit or path.name.endswith(BAG_SUFFIXES):
@@ -98,7 +98,7 @@ def find_bags(args: Sequence[str], skip: Iterable[str | Path] = ()) -> list[Path
 
 
 def _base_name(bag: Path) -> str:
-    return bag.stem if bag.is_file() else bag.name
+    return bag.stem if bag.suffix in BAG_SUFFIXES and not bag.is_dir() else bag.name
 
 
 def _path_hash(bag: Path) -> str:

@@ -85,6 +85,7 @@ class Job:
     columns: tuple[Column, ...]
     plots: tuple[tuple[str, tuple[str, ...]], ...] = ()
     ignored: frozenset[str] = field(default_factory=frozenset)
+    counts_messages: bool = False
 
 
 # -- info ---------------------------------------------------------------------
@@ -177,7 +178,7 @@ JOBS: dict[str, Job] = {
         (Column("bag_duration_s", ("duration_s",)), Column("topics", ("topics",), "int", "count"),
          Column("tf_frames", ("tf_frames",), "int", "count"), _WARN),
         plots=(("messages", ("messages",)), ("bag duration [s]", ("bag_duration_s",))),
-        ignored=frozenset({"as_json"})),
+        ignored=frozenset({"as_json"}), counts_messages=True),
     "map-cloud": Job(
         "map-cloud", _map_cloud_options, _map_cloud,
         (Column("clouds_used", ("clouds_used",), "int"), Column("clouds_skipped", ("clouds_skipped",), "int", "total"),
