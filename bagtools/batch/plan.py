@@ -21,7 +21,9 @@ from typing import Any
 
 from bagtools.batch.bags import BATCH_MANIFEST, RESERVED_NAMES, find_bags, output_names
 from bagtools.batch.jobs import Job, get_job
-from bagtools.batch.task import FAILED, BagTask, ForeignOutputError, check_owner, completed_row, new_row, read_marker
+from bagtools.batch.task import (
+    COMMON_COLUMNS, FAILED, BagTask, ForeignOutputError, check_owner, completed_row, new_row, read_marker,
+)
 from bagtools.errors import BagtoolsError
 
 
@@ -119,6 +121,4 @@ def plan_batch(command: str, bag_args: Sequence[str], out_dir: str | Path, param
 
 def row_columns(job: Job) -> list[str]:
     """The fleet table's columns for ``job``: the common ones, then the command's."""
-    from bagtools.batch.task import COMMON_COLUMNS
-
     return [*COMMON_COLUMNS, *(c.name for c in job.columns)]

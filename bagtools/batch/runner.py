@@ -29,9 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bagtools.batch.plan import BatchPlan, claim_out_dir
+from bagtools.batch.plan import BatchPlan, claim_out_dir, row_columns
 from bagtools.batch.task import (
-    FAILED, OK, SKIPPED, BagTask, completed_row, new_row, one_line, read_marker, run_task,
+    FAILED, SKIPPED, BagTask, completed_row, new_row, one_line, read_marker, run_task,
 )
 from bagtools.errors import BagtoolsError
 from bagtools.progress import progress_bar
@@ -106,9 +106,9 @@ class BatchRun:
     def run(self) -> list[dict]:
         """Run every task; return the rows in bag order. KeyboardInterrupt cancels what is left and re-raises."""
         if self.plan.tasks:
-            claim_out_dir(self.plan.out_dir, self.plan.command)
             with self._client() as client:
                 self._check_workers(client)
+                claim_out_dir(self.plan.out_dir, self.plan.command)
                 futures = self._submit(client)
                 try:
                     self._collect(futures)
@@ -201,34 +201,36 @@ class BatchRun:
     def _collect(self, futures: dict[Any, BagTask]) -> None:
         from distributed import as_completed
 
-        job = self.plan.job
+        columns = row_columns(self.plan.job)
         skipped = sum(row["status"] == SKIPPED for row in self.rows.values())
         with progress_bar(total=self.plan.total, desc=f"batch {self.plan.command}", unit="bag") as bar:
             bar.update(len(self.rows))
             for future in as_completed(list(futures)):
                 task = futures[future]
-                row = self._row_of(future, task)
-                self.rows[task.name] = {k: row.get(k) for k in (*new_row(task, OK), *(c.name for c in job.columns))}
+                row = row_of_future(future, task)
+                self.rows[task.name] = {k: row.get(k) for k in columns}
                 bar.update(1)
                 failed = sum(r["status"] == FAILED for r in self.rows.values())
                 bar.set_postfix(failed=failed, skipped=skipped, refresh=False)
 
-    @staticmethod
-    def _row_of(future: Any, task: BagTask) -> dict:
-        """The task's row; a failure of Dask itself (e.g. the worker died too often) as a failed row."""
-        from distributed import KilledWorker
 
-        if future.status == "finished":
-            return future.result()
-        if future.status == "cancelled":
-            return new_row(task, FAILED, "internal error: the Dask scheduler cancelled the task")
-        exc = future.exception()
-        if isinstance(exc, KilledWorker):
-            why = ("the worker running it died each time it was tried (killed, out of memory or a crash in native "
-                   "code)")
-        else:
-            why = f"internal error: {type(exc).__name__}: {exc}"
-        return new_row(task, FAILED, one_line(f"{task.bag}: {why}" if isinstance(exc, KilledWorker) else why))
+def row_of_future(future: Any, task: BagTask) -> dict:
+    """The row of a finished Dask future of ``task``; a failure of Dask itself is a failed row.
+
+    The task never raises for its bag, so an error here is Dask's: the bag
+    killed every worker it ran on (``KilledWorker``), or something internal.
+    """
+    from distributed import KilledWorker
+
+    if future.status == "finished":
+        return future.result()
+    if future.status == "cancelled":
+        return new_row(task, FAILED, "internal error: Dask cancelled the task")
+    exc = future.exception()
+    if isinstance(exc, KilledWorker):
+        return new_row(task, FAILED, f"{task.bag}: the worker running it died each time it was tried "
+                                     "(killed, out of memory, or a crash in native code)")
+    return new_row(task, FAILED, one_line(f"internal error: {type(exc).__name__}: {exc}"))
 
 
 def run_batch(plan: BatchPlan, cluster: ClusterSpec, notify: Callable[[str], None] = lambda text: None) -> list[dict]:
