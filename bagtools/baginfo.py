@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.io import TfCollector, open_bag
+from bagtools.io.storage import StorageDetails, qos_text, storage_details
 from bagtools.progress import progress
 from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
 from bagtools.tf.repair import tf_conflicts
@@ -42,6 +43,7 @@ class BagDescription:
     topics: list[TopicSummary]
     frames: list[FrameInfo]
     warnings: list[str] = field(default_factory=list)
+    storage: StorageDetails | None = None
 
     @property
     def duration_s(self) -> float:
@@ -58,10 +60,41 @@ class BagDescription:
             "end_iso": _iso(self.end_ns),
             "duration_s": self.duration_s,
             "message_count": self.message_count,
-            "topics": [t.__dict__ for t in self.topics],
+            **self._storage_json(),
+            "topics": [self._topic_json(t) for t in self.topics],
             "tf_frames": [f.to_dict() for f in self.frames],
             "warnings": self.warnings,
         }
+
+
+    def _storage_json(self) -> dict:
+        s = self.storage
+        if s is None:
+            return {}
+        return {"storage_id": s.storage_id, "bag_size_bytes": s.size_bytes, "files": s.files,
+                "ros_distro": s.ros_distro, "ros_version": s.ros_version, "metadata_version": s.metadata_version,
+                "serialization_format": ", ".join(s.serialization_formats)}
+
+    def _topic_json(self, topic: TopicSummary) -> dict:
+        out = dict(topic.__dict__)
+        stored = self.storage.topics.get(topic.name) if self.storage else None
+        if stored is not None:
+            out["serialization_format"] = stored.serialization_format
+            if stored.latching is None:
+                out["offered_qos_profiles"] = stored.offered_qos_profiles
+            else:
+                out["latching"] = stored.latching
+        return out
+
+
+def _size_text(size_bytes: int) -> str:
+    """Bytes as ros2 bag info shows them (KiB, MiB, GiB), with the exact count."""
+    value, unit = float(size_bytes), "B"
+    for next_unit in ("KiB", "MiB", "GiB", "TiB"):
+        if value < 1024:
+            break
+        value, unit = value / 1024, next_unit
+    return f"{value:.1f} {unit} ({size_bytes} bytes)" if unit != "B" else f"{size_bytes} B"
 
 
 def _seconds(stamp_ns: int) -> str:
@@ -92,7 +125,8 @@ def describe_bag(path: str | Path) -> BagDescription:
                                        int(stamps.min()) if stamps.size else 0, int(stamps.max()) if stamps.size else 0))
         dynamic, static = collector.arrays()
         return BagDescription(str(bag.path), bag.kind, bag.start_ns, bag.end_ns, sum(t.count for t in topics),
-                              topics, frame_infos(dynamic, static), list(bag.warnings) + tf_conflicts(dynamic, static))
+                              topics, frame_infos(dynamic, static), list(bag.warnings) + tf_conflicts(dynamic, static),
+                              storage_details(bag))
 
 
 def format_description(desc: BagDescription) -> str:
@@ -104,13 +138,22 @@ def format_description(desc: BagDescription) -> str:
         f"start:      {_iso(desc.start_ns)} ({_seconds(desc.start_ns)} s)",
         f"end:        {_iso(desc.end_ns)} ({_seconds(desc.end_ns)} s)",
         f"messages:   {desc.message_count}",
-        "",
     ]
+    s = desc.storage
+    if s is not None:
+        distro = s.ros_distro or f"unknown (ROS {s.ros_version})"
+        lines += [f"storage id: {s.storage_id}", f"bag size:   {_size_text(s.size_bytes)}", f"ROS distro: {distro}",
+                  f"serialization format: {', '.join(s.serialization_formats) or 'unknown'}"]
+    lines.append("")
     width = max((len(t.name) for t in desc.topics), default=5)
     type_width = max((len(t.msgtype) for t in desc.topics), default=4)
-    lines.append(f"{'topic'.ljust(width)}  {'type'.ljust(type_width)}  {'count':>7}  {'freq (Hz)':>9}")
+    lines.append(f"{'topic'.ljust(width)}  {'type'.ljust(type_width)}  {'count':>7}  {'freq (Hz)':>9}  QoS")
     for t in desc.topics:
-        lines.append(f"{t.name.ljust(width)}  {t.msgtype.ljust(type_width)}  {t.count:>7}  {t.frequency_hz:>9.2f}")
+        stored = s.topics.get(t.name) if s is not None else None
+        qos = "" if stored is None else ("latched" if stored.latching else "") if stored.latching is not None \
+            else qos_text(stored.offered_qos_profiles)
+        lines.append(f"{t.name.ljust(width)}  {t.msgtype.ljust(type_width)}  {t.count:>7}  {t.frequency_hz:>9.2f}  {qos}"
+                     .rstrip())
     lines.append("")
     if desc.frames:
         # Header stamps may be on another clock than bag time (simulation time),

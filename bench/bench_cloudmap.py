@@ -1,12 +1,13 @@
 """map-cloud throughput: input points per second end to end (read, decode, tf lookup, sample,
-transform, accumulate) against the bare read-and-decode of the same clouds."""
+transform, accumulate) against the bare read-and-decode of the same clouds; and the cost of results.mcap:
+the run with its files written, with results.mcap against without."""
 
 from __future__ import annotations
 
 import tempfile
 from pathlib import Path
 
-from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
+from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, write_cloud_map
 from bagtools.io import decode_pointcloud2, open_bag
 from bench.common import Row, best_time_s
 from simulate.pipeline import SimConfig, simulate_bag
@@ -34,4 +35,14 @@ def run(quick: bool) -> list[Row]:
             t_map = best_time_s(lambda: CloudMapPipeline(bag, CloudMapOptions()).run(), repeat=2)
             rows.append(Row("map-cloud", f"input points/s end to end, {w}x{h} clouds, --sample 0.01",
                             n_points / t_map, "points/s", "read+decode only", n_points / t_base))
+            out = Path(tmp) / f"out_{w}"
+
+            def with_files(mcap: bool) -> None:
+                result = CloudMapPipeline(bag, CloudMapOptions(), keep_inputs=mcap).run()
+                write_cloud_map(result, out, force=True, mcap=mcap)
+
+            t_plain = best_time_s(lambda: with_files(False), repeat=2)
+            t_mcap = best_time_s(lambda: with_files(True), repeat=2)
+            rows.append(Row("map-cloud", f"input points/s with files, {w}x{h} clouds, with results.mcap",
+                            n_points / t_mcap, "points/s", "same run with --no-mcap", n_points / t_plain))
     return rows

@@ -1,6 +1,7 @@
 """``bagtools grid`` throughput: scans per second end to end (read, decode, tf lookup, ray casting into
 the grid, scoring against the true world, writing map.pgm/.yaml/.png/summary.json) against the bare
-read-and-decode of the same scans, on a simulated lap (360 beams, 3.5 m, 5 cm cells)."""
+read-and-decode of the same scans, on a simulated lap (360 beams, 3.5 m, 5 cm cells); and the cost of
+results.mcap (/map, /trajectory, /tf and every scan re-published) against the same run with --no-mcap."""
 
 from __future__ import annotations
 
@@ -23,10 +24,10 @@ def _read_decode(bag: Path) -> int:
     return n
 
 
-def _grid(bag: Path, out_dir: Path, options: GridMapOptions, write: bool) -> None:
-    result = GridMapPipeline(bag, options).run()
+def _grid(bag: Path, out_dir: Path, options: GridMapOptions, write: bool, mcap: bool = False) -> None:
+    result = GridMapPipeline(bag, options, keep_scans=mcap).run()
     if write:
-        write_grid_map(result, out_dir, force=True)
+        write_grid_map(result, out_dir, force=True, mcap=mcap)
 
 
 def run(quick: bool) -> list[Row]:
@@ -43,4 +44,8 @@ def run(quick: bool) -> list[Row]:
             t = best_time_s(lambda: _grid(bag, Path(tmp) / "out", options, write), repeat=2)
             rows.append(Row("grid", f"scans/s end to end, {duration:g} s lap, {label}", n_scans / t, "scans/s",
                             "read+decode only", n_scans / t_base))
+        t_plain = best_time_s(lambda: _grid(bag, Path(tmp) / "out", GridMapOptions(), True, False), repeat=2)
+        t_mcap = best_time_s(lambda: _grid(bag, Path(tmp) / "out", GridMapOptions(), True, True), repeat=2)
+        rows.append(Row("grid", f"scans/s end to end, {duration:g} s lap, tf poses, with results.mcap", n_scans / t_mcap,
+                        "scans/s", "same run with --no-mcap", n_scans / t_plain))
     return rows

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from bagtools.io import decode_laserscan, open_bag
-from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline
+from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 from bagtools.trajectory import rpe_frames
 from bench.common import Row, best_time_s
 from simulate.pipeline import SimConfig, simulate_bag
@@ -94,6 +94,13 @@ def run(quick: bool) -> list[Row]:
         decode_s = best_time_s(lambda: _read_decode(bag), repeat)
         results = []
         pipeline_s = best_time_s(lambda: results.append(NdtOdomPipeline(bag, NdtOdomOptions()).run()), repeat)
+
+        def with_files(mcap: bool) -> None:
+            result = NdtOdomPipeline(bag, NdtOdomOptions(), keep_scans=mcap).run()
+            write_ndt_odom(result, Path(tmp) / "out", force=True, mcap=mcap)
+
+        plain_s = best_time_s(lambda: with_files(False), repeat)
+        mcap_s = best_time_s(lambda: with_files(True), repeat)
     summary = results[-1].summary
     ndt_ate = summary["errors_ndt"]["ape_translation_m"]["rmse"]
     odom_ate = summary["errors_odometry"]["ape_translation_m"]["rmse"]
@@ -102,4 +109,6 @@ def run(quick: bool) -> list[Row]:
             n_scans / pipeline_s, "scans/s", "read + decode of the same scans", n_scans / decode_s, True, ">= 5 (real time)"),
         Row("ndt-odom", f"APE rmse of NDT on a {duration:g} s lap, realistic odometry noise", ndt_ate, "m",
             "wheel odometry APE rmse", odom_ate, False, "<= 0.5 x odometry"),
+        Row("ndt-odom", f"whole run with its files on a {duration:g} s lap, with results.mcap", n_scans / mcap_s,
+            "scans/s", "same run with --no-mcap", n_scans / plain_s),
     ] + ([] if quick else _real_rows())

@@ -1,8 +1,8 @@
 """Simulator speed: simulated seconds per wall second, default configuration and 640x480 clouds.
 
-Baseline, measured in the same run: the same bag without any sensor simulation (route,
-controller, odometry, AMCL and the writer only, ``--no-cloud`` with the lidar replaced by
-constant ranges), i.e. the cost floor of the pipeline around the ray casting.
+Baseline, measured in the same run: the same bag without any ray-cast sensor (route,
+controller, odometry, AMCL, IMU, joint states, tf and the writer only, ``--no-cloud`` with the
+lidar replaced by constant ranges), i.e. the cost floor of the pipeline around the ray casting.
 """
 
 from __future__ import annotations

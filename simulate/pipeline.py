@@ -27,20 +27,29 @@ from simulate.robot.waffle import (
     MAX_LINEAR_MPS,
     ROBOT_RADIUS_M,
     STATIC_TRANSFORMS,
+    WHEEL_JOINT_MODELS,
+    WHEEL_JOINTS,
     T_base_footprint_frame,
+    urdf_text,
+    wheel_quats_xyzw,
 )
-from simulate.sensors import DepthCamera, Lidar
+from simulate.sensors import DepthCamera, Imu, Lidar
 from simulate.world import World, load_world
-from simulate.writer import ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
+from simulate.writer import DEFAULT_ROS_DISTRO, ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
 
 ODOM_RATE_HZ = 30
 STEPS_PER_SCAN = 6  # 5 Hz scans at the 30 Hz odometry rate
 CLICK_PERIOD_S = 20.0
 MAX_CLOUD_PIXELS = 1280 * 960
 # Transport latency ranges (ms) between a message's stamp and its bag time.
-LATENCY_MS = {"tf": (1, 5), "odom": (1, 5), "truth": (1, 5), "scan": (10, 30), "cloud": (20, 60), "amcl": (5, 20), "click": (1, 5)}
+LATENCY_MS = {"tf": (1, 5), "odom": (1, 5), "truth": (1, 5), "scan": (10, 30), "cloud": (20, 60), "amcl": (5, 20),
+              "click": (1, 5), "joints": (1, 5), "imu": (1, 3)}
 WORLD_TOPIC = "/simulation/world"
 CLOUD_TOPIC = "/camera/depth/points"
+CAMERA_INFO_TOPIC = "/camera/depth/camera_info"
+CLOUD_FRAME = "camera_depth_optical_frame"  # as Gazebo's depth plugin publishes the R200's cloud
+IMU_FRAME = "imu_link"
+BATCH_BLOCK = 4096  # messages serialized at once per fixed-layout stream (bounds memory on long runs)
 
 
 @dataclass(frozen=True)
@@ -56,7 +65,7 @@ class SimConfig:
     cloud: bool = True
     cloud_rate_hz: float = 2.0
     cloud_size: tuple[int, int] = (160, 120)
-    ros_distro: str = "jazzy"
+    ros_distro: str = DEFAULT_ROS_DISTRO  # humble: metadata version 5, which Humble and Jazzy both read
     world: str = "turtlebot3_world"
     start_time_ns: int = 1_700_000_000_000_000_000
 
@@ -137,7 +146,8 @@ def plan_trajectory(config: SimConfig, world: World) -> Trajectory:
 
 
 def _rngs(seed: int) -> dict[str, np.random.Generator]:
-    names = ("odom", "amcl", "latency", "scan", "cloud", "click")
+    # New streams go at the end: each child seed depends only on its position.
+    names = ("odom", "amcl", "latency", "scan", "cloud", "click", "imu")
     children = np.random.SeedSequence([seed, 0x5151]).spawn(len(names))
     return {n: np.random.default_rng(c) for n, c in zip(names, children)}
 
@@ -150,9 +160,10 @@ def _latency_ns(rng: np.random.Generator, kind: str, n: int) -> np.ndarray:
 class _BagSimulation:
     """One bag's messages: when each is stamped and logged, and how it is built.
 
-    The random streams are drawn in a fixed order (AMCL estimates, clicks,
-    latencies, then scan and cloud noise in bag order), so the same
-    configuration gives the same bytes.
+    The random streams are drawn in a fixed order (AMCL estimates, clicks, latencies, then scan and cloud noise in bag order), so the same configuration gives the
+    same bytes. The fixed-layout streams (odometry, tf, joint states, IMU) are serialized in
+    blocks of ``BATCH_BLOCK`` messages as the writing reaches them (IMU noise is drawn block by
+    block); scans and clouds are simulated one by one.
     """
 
     def __init__(self, config: SimConfig, world: World, traj: Trajectory, rngs: dict[str, np.random.Generator]) -> None:
@@ -172,20 +183,29 @@ class _BagSimulation:
             cloud_ns = self.t0 + np.round(np.arange(n_clouds) * 1e9 / config.cloud_rate_hz).astype(np.int64)
             self.cloud_ns = cloud_ns[cloud_ns <= step_ns[-1]]
             self.cloud_poses = motion.pose_at_offset((self.cloud_ns - self.t0) / 1e9)
-            self.T_base_optical = T_base_footprint_frame("camera_rgb_optical_frame")
+            self.T_base_optical = T_base_footprint_frame(CLOUD_FRAME)
         n_clicks = int(config.duration_s // CLICK_PERIOD_S)
         self.click_ns = self.t0 + np.arange(1, n_clicks + 1, dtype=np.int64) * int(CLICK_PERIOD_S * 1e9)
         self.click_points = _clicked_points(world, motion.pose_at_offset((self.click_ns - self.t0) / 1e9), rngs["click"])
         self.world_json = json.dumps(
             {"world": world.to_json(), "config": _config_json(config), "robot": "turtlebot3_waffle"}, sort_keys=True)
+        # IMU readings at its own rate over the whole run.
+        self.imu = Imu()
+        n_imu = int((step_ns[-1] - self.t0) * self.imu.rate_hz // 1_000_000_000) + 1
+        self.imu_ns = self.t0 + (np.arange(n_imu, dtype=np.int64) * 1_000_000_000) // int(self.imu.rate_hz)
         # Twists over the step that ended at each stamp.
         self.v_true, self.w_true = _previous_step(motion.v_mps), _previous_step(motion.w_radps)
         self.v_odom, self.w_odom = _previous_step(odom.v_mps), _previous_step(odom.w_radps)
+        # Wheel joints: the encoder angles the odometry integrated, and their rates over the last step.
+        self.wheel_rad = np.column_stack([odom.wheel_left_rad, odom.wheel_right_rad])
+        self.wheel_radps = np.vstack([np.zeros((1, 2)), np.diff(self.wheel_rad, axis=0) / motion.dt_s])
+        self._blocks: dict[str, tuple[int, np.ndarray]] = {}
 
     @property
     def topics(self) -> list[str]:
-        topics = [WORLD_TOPIC, "/tf_static", "/tf", "/odom", "/ground_truth", "/scan", "/clicked_point"]
-        return topics + [CLOUD_TOPIC] if self.config.cloud else topics
+        topics = [WORLD_TOPIC, "/robot_description", "/tf_static", "/tf", "/odom", "/joint_states", "/imu",
+                  "/ground_truth", "/scan", "/clicked_point"]
+        return topics + [CAMERA_INFO_TOPIC, CLOUD_TOPIC] if self.config.cloud else topics
 
     def schedule(self) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
         """(kinds, kind index, message index, log time ns) of every message, in bag (log-time) order."""
@@ -202,28 +222,67 @@ class _BagSimulation:
             ("cloud", self.cloud_ns + _latency_ns(lat, "cloud", len(self.cloud_ns))),
             ("click", self.click_ns + _latency_ns(lat, "click", len(self.click_ns))),
         ]
+        joints_log = step_ns + _latency_ns(lat, "joints", len(step_ns))
+        streams += [
+            ("robot_description", np.array([self.t0])),
+            ("joints", joints_log),
+            # robot_state_publisher turns each /joint_states into the wheels' /tf.
+            ("tf_wheels", joints_log + _latency_ns(lat, "tf", len(step_ns))),
+            ("imu", self.imu_ns + _latency_ns(lat, "imu", len(self.imu_ns))),
+            ("camera_info", self.cloud_ns + _latency_ns(lat, "cloud", len(self.cloud_ns))),
+        ]
         log_ns = np.concatenate([times for _, times in streams])
         kind = np.concatenate([np.full(len(times), i) for i, (_, times) in enumerate(streams)])
         index = np.concatenate([np.arange(len(times)) for _, times in streams])
         order = np.lexsort((index, kind, log_ns))
         return [name for name, _ in streams], kind[order], index[order], log_ns[order]
 
+    def _batch(self, mb: MessageBuilder, name: str, j: int) -> bytes:
+        """Message ``j`` of a fixed-layout stream, serialized with its block of ``BATCH_BLOCK`` neighbours."""
+        block = j // BATCH_BLOCK
+        cached = self._blocks.get(name)
+        if cached is None or cached[0] != block:
+            if name == "imu" and block != (cached[0] + 1 if cached else 0):
+                raise ValueError("IMU blocks must be built in order (their noise is drawn block by block)")
+            cached = (block, self._serialize_block(mb, name, slice(block * BATCH_BLOCK, (block + 1) * BATCH_BLOCK)))
+            self._blocks[name] = cached
+        return cached[1][j - block * BATCH_BLOCK].tobytes()
+
+    def _serialize_block(self, mb: MessageBuilder, name: str, sl: slice) -> np.ndarray:
+        step_ns, odom, motion = self.traj.step_ns, self.traj.odometry, self.traj.motion
+        if name == "tf_odom":
+            return mb.planar_tf_batch(step_ns[sl], "odom", "base_footprint", odom.poses[sl])
+        if name == "odom":
+            return mb.odometry_batch(step_ns[sl], "odom", "base_footprint", odom.poses[sl], self.v_odom[sl],
+                                     self.w_odom[sl])
+        if name == "truth":
+            return mb.odometry_batch(step_ns[sl], "map", "base_footprint", motion.poses[sl], self.v_true[sl],
+                                     self.w_true[sl], truth=True)
+        if name == "joints":
+            return mb.joint_state_batch(step_ns[sl], WHEEL_JOINTS, self.wheel_rad[sl], self.wheel_radps[sl])
+        if name == "tf_wheels":
+            wheel_rad = self.wheel_rad[sl]
+            xyz = np.broadcast_to(np.array([j.xyz_m for j in WHEEL_JOINT_MODELS]), (len(wheel_rad), 2, 3))
+            quats = np.stack([wheel_quats_xyzw(j, wheel_rad[:, i]) for i, j in enumerate(WHEEL_JOINT_MODELS)], axis=1)
+            return mb.transforms_batch(step_ns[sl], tuple((j.parent, j.child) for j in WHEEL_JOINT_MODELS), xyz, quats)
+        imu = self.imu  # name == "imu"
+        samples = imu.samples(motion, (self.imu_ns[sl] - self.t0) / 1e9, self.rngs["imu"])
+        return mb.imu_batch(self.imu_ns[sl], IMU_FRAME, samples.quat_xyzw, samples.angular_velocity_radps,
+                            samples.linear_acceleration_mps2,
+                            (imu.orientation_covariance, imu.angular_velocity_covariance,
+                             imu.linear_acceleration_covariance))
+
     def message(self, mb: MessageBuilder, name: str, j: int) -> tuple[str, bytes]:
         """(topic, serialized message) number ``j`` of stream ``name``."""
-        step_ns, odom, motion = self.traj.step_ns, self.traj.odometry, self.traj.motion
+        if name in _BATCH_TOPICS:
+            return _BATCH_TOPICS[name], self._batch(mb, name, j)
         if name == "world":
             return WORLD_TOPIC, mb.string(self.world_json)
+        if name == "robot_description":
+            return "/robot_description", mb.string(urdf_text())
         if name == "tf_static":
             return "/tf_static", mb.tf_message([(self.t0, st.parent, st.child, st.xyz_m, st.quat_xyzw)
                                                 for st in STATIC_TRANSFORMS])
-        if name == "tf_odom":
-            return "/tf", mb.planar_tf(int(step_ns[j]), "odom", "base_footprint", *odom.poses[j])
-        if name == "odom":
-            return "/odom", mb.odometry(int(step_ns[j]), "odom", "base_footprint", *odom.poses[j],
-                                        self.v_odom[j], self.w_odom[j])
-        if name == "truth":
-            return "/ground_truth", mb.odometry(int(step_ns[j]), "map", "base_footprint", *motion.poses[j],
-                                                self.v_true[j], self.w_true[j], truth=True)
         if name == "scan":
             return "/scan", self._scan(mb, j)
         if name == "tf_map":
@@ -231,8 +290,13 @@ class _BagSimulation:
         if name == "cloud":
             T_map_optical = pose2tform(self.cloud_poses[j]) @ self.T_base_optical
             points = self.camera.points(self.world, T_map_optical, self.rngs["cloud"])
-            return CLOUD_TOPIC, mb.point_cloud(int(self.cloud_ns[j]), "camera_rgb_optical_frame", points)
-        return "/clicked_point", mb.point_stamped(int(self.click_ns[j]), "map", self.click_points[j])
+            return CLOUD_TOPIC, mb.point_cloud(int(self.cloud_ns[j]), CLOUD_FRAME, points)
+        if name == "camera_info":
+            cam = self.camera
+            return CAMERA_INFO_TOPIC, mb.camera_info(int(self.cloud_ns[j]), CLOUD_FRAME, cam.width, cam.height, cam.K, cam.P)
+        if name == "click":
+            return "/clicked_point", mb.point_stamped(int(self.click_ns[j]), "map", self.click_points[j])
+        raise ValueError(f"unknown stream {name!r}")
 
     def _scan(self, mb: MessageBuilder, j: int) -> bytes:
         T_map_scan = pose2tform(self.traj.motion.poses[self.scan_steps[j]]) @ self.T_base_scan
@@ -242,6 +306,10 @@ class _BagSimulation:
         ranges = lidar.scan(self.world, (x, y, z, yaw), self.rngs["scan"])
         return mb.laser_scan(int(self.scan_ns[j]), "base_scan", ranges, lidar.angle_min_rad, lidar.angle_increment_rad,
                              lidar.range_min_m, lidar.range_max_m, 1.0 / lidar.rate_hz)
+
+
+_BATCH_TOPICS = {"tf_odom": "/tf", "odom": "/odom", "truth": "/ground_truth", "joints": "/joint_states",
+                 "tf_wheels": "/tf", "imu": "/imu"}
 
 
 def _previous_step(values: np.ndarray) -> np.ndarray:

@@ -68,13 +68,22 @@ class JobOutput:
 
 
 @dataclass(frozen=True)
+class WriterConfig:
+    """A job's configuration: the library's options object and whether the writer adds results.mcap (--no-mcap)."""
+
+    options: Any
+    mcap: bool = True
+
+
+@dataclass(frozen=True)
 class Job:
     """One command as a batch job.
 
     ``options(params)``: the command's parsed parameters (click's names, less
-    ``bag``, ``out_dir`` and ``force``) to the library's options object; it
-    raises :class:`BagtoolsError` for a bad value, before any work.
-    ``run(bag, out_dir, options, force)``: the command's library calls and
+    ``bag``, ``out_dir`` and ``force``) to the job's configuration (picklable:
+    it travels to the workers), built as the command builds it, so it raises
+    :class:`BagtoolsError` for a bad value before any work.
+    ``run(bag, out_dir, config, force)``: the command's library calls and
     writer. ``ignored``: parameters that mean nothing in a batch. ``plots``: panels of
     fleet.png, each a title and the columns it draws.
     """
@@ -110,62 +119,89 @@ def _info(bag: str, out_dir: Path, options: None, force: bool) -> JobOutput:
 # -- map-cloud ----------------------------------------------------------------
 
 
-def _map_cloud_options(p: Mapping[str, Any]) -> Any:
+def _map_cloud_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.cloudmap import CloudMapOptions
 
-    return CloudMapOptions(topic=p["topic"], frame=p["frame"], stamp=p["stamp"], sample=p["sample"],
-                           voxel_m=p["voxel"], max_range_m=p["max_range"], seed=p["seed"])
+    return WriterConfig(CloudMapOptions(topic=p["topic"], frame=p["frame"], stamp=p["stamp"], sample=p["sample"],
+                                        voxel_m=p["voxel"], max_range_m=p["max_range"], seed=p["seed"]),
+                        mcap=not p["no_mcap"])
 
 
-def _map_cloud(bag: str, out_dir: Path, options: Any, force: bool) -> JobOutput:
+def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.cloudmap import CLOUD_MAP_FILES, CloudMapPipeline, write_cloud_map
 
     check_outputs(out_dir, CLOUD_MAP_FILES, force)
-    result = CloudMapPipeline(bag, options).run()
-    written = write_cloud_map(result, out_dir, force)
+    result = CloudMapPipeline(bag, config.options, keep_inputs=config.mcap).run()
+    written = write_cloud_map(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
 
 
 # -- grid ---------------------------------------------------------------------
 
 
-def _grid_options(p: Mapping[str, Any]) -> Any:
+def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.gridmap import GridMapOptions
 
-    return GridMapOptions(topic=p["topic"], frame=p["frame"] or GridMapOptions.default_frame(p["poses"]),
-                          poses=p["poses"], resolution=p["resolution"], max_range_m=p["max_range"],
-                          base_frame=p["base_frame"], scan_frame_offset=p["scan_frame_offset"])
+    return WriterConfig(GridMapOptions(topic=p["topic"], frame=p["frame"] or GridMapOptions.default_frame(p["poses"]),
+                                       poses=p["poses"], resolution=p["resolution"], max_range_m=p["max_range"],
+                                       base_frame=p["base_frame"], scan_frame_offset=p["scan_frame_offset"]),
+                        mcap=not p["no_mcap"])
 
 
-def _grid(bag: str, out_dir: Path, options: Any, force: bool) -> JobOutput:
+def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.gridmap import GRID_MAP_FILES, GridMapPipeline, write_grid_map
 
     check_outputs(out_dir, GRID_MAP_FILES, force)
-    result = GridMapPipeline(bag, options).run()
-    written = write_grid_map(result, out_dir, force)
+    result = GridMapPipeline(bag, config.options, keep_scans=config.mcap).run()
+    written = write_grid_map(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
 
 
 # -- ndt-odom -----------------------------------------------------------------
 
 
-def _ndt_odom_options(p: Mapping[str, Any]) -> Any:
+def _ndt_odom_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.ndtodom import NdtOdomOptions
 
-    return NdtOdomOptions(topic=p["topic"], init=p["init"], search=not p["no_search"],
-                          use_odometry=not p["no_odometry"], reference=p["reference"], cell_size_m=p["cell_size"],
-                          cell_model=p["cell_model"], min_score=p["min_score"], max_speed_mps=p["max_speed"],
-                          max_turn_rate_radps=p["max_turn_rate"], scan_frame_offset=p["scan_frame_offset"])
+    return WriterConfig(NdtOdomOptions(topic=p["topic"], init=p["init"], search=not p["no_search"],
+                                       use_odometry=not p["no_odometry"], reference=p["reference"],
+                                       cell_size_m=p["cell_size"], cell_model=p["cell_model"],
+                                       min_score=p["min_score"], max_speed_mps=p["max_speed"],
+                                       max_turn_rate_radps=p["max_turn_rate"], wheeled=not p["holonomic"],
+                                       scan_frame_offset=p["scan_frame_offset"]),
+                        mcap=not p["no_mcap"])
 
 
-def _ndt_odom(bag: str, out_dir: Path, options: Any, force: bool) -> JobOutput:
+def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomPipeline, write_ndt_odom
 
     check_outputs(out_dir, NDT_ODOM_FILES, force)
-    result = NdtOdomPipeline(bag, options).run()
+    result = NdtOdomPipeline(bag, config.options, keep_scans=config.mcap).run()
     if result.problem is not None:  # as the command: a failed run changes nothing in its directory
         raise BagtoolsError(result.problem, bag)
-    written = write_ndt_odom(result, out_dir, force)
+    written = write_ndt_odom(result, out_dir, force, mcap=config.mcap)
+    return JobOutput(result.summary, [p.name for p in written])
+
+
+# -- slam ---------------------------------------------------------------------
+
+
+def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
+    from bagtools.slam import SlamOptions
+
+    return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=p["resolution"],
+                                    max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],
+                                    loop_closure=not p["no_loop_closure"], loop_min_score=p["loop_min_score"],
+                                    keep_scans=not p["no_mcap"]),
+                        mcap=not p["no_mcap"])
+
+
+def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
+    from bagtools.slam import SLAM_FILES, SlamPipeline, write_slam
+
+    check_outputs(out_dir, SLAM_FILES, force)
+    result = SlamPipeline(bag, config.options).run()
+    written = write_slam(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
 
 
@@ -206,6 +242,17 @@ JOBS: dict[str, Job] = {
          Column("rpe_odometry_m_per_m", ("errors_odometry", "rpe_translation_m_per_1m", "rmse")), _WARN),
         plots=(("APE rmse [m]", ("ape_ndt_m", "ape_odometry_m")),
                ("pairs", ("searched", "fallbacks", "odometry_rejected")))),
+    "slam": Job(
+        "slam", _slam_options, _slam,
+        (Column("scans", ("scans",), "int"), Column("keyframes", ("keyframes",), "int"),
+         Column("loops_accepted", ("loop_closure", "accepted"), "int"),
+         Column("loops_rejected", ("loop_closure", "rejected"), "int"),
+         Column("ape_slam_m", ("errors_slam", "ape_aligned_m", "rmse")),
+         Column("ape_front_end_m", ("errors_front_end", "ape_aligned_m", "rmse")),
+         Column("gap20_slam_m", ("errors_slam", "relative_gap_20", "trans_mean_m")),
+         Column("optimize_s", ("optimization", "time_s")), _WARN),
+        plots=(("APE after alignment [m]", ("ape_slam_m", "ape_front_end_m")),
+               ("loop closures", ("loops_accepted", "loops_rejected")))),
 }
 
 

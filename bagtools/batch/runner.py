@@ -171,8 +171,10 @@ class BatchRun:
     def _check_workers(self, client: Any) -> None:
         import bagtools
 
-        first = self.plan.tasks[0]
-        paths = [first.bag, str(self.plan.out_dir)]
+        out = self.plan.out_dir  # it may not exist yet: its nearest existing folder must be visible
+        while not out.exists() and out.parent != out:
+            out = out.parent
+        paths = [self.plan.tasks[0].bag, str(out)]
         try:
             problems = client.run(_worker_ready, self.plan.command, bagtools.__version__, paths)
         except Exception as err:  # e.g. a worker without bagtools cannot even unpack the check

@@ -27,6 +27,8 @@ COMMANDS: dict[str, str] = {
     "map-cloud": "bagtools.cli.map_cloud:map_cloud",
     "ndt-odom": "bagtools.cli.ndt_odom:ndt_odom",
     "grid": "bagtools.cli.grid:grid",
+    "slam": "bagtools.cli.slam:slam",
+    "export": "bagtools.cli.export:export",
     "batch": "bagtools.cli.batch:batch",
 }
 

@@ -58,7 +58,7 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     """Run COMMAND on every bag of BAGS in parallel on Dask, one row per bag in DIR/fleet.csv.
 
     COMMAND is a bagtools command that reads one bag: info (writes
-    info.json), map-cloud, grid or ndt-odom; its options follow '--'. BAGS are
+    info.json), map-cloud, grid, ndt-odom or slam; its options follow '--'. BAGS are
     paths or globs; a folder is searched for rosbag2 directories and .mcap,
     .db3 and .bag files. Each bag's outputs go to DIR/<bag>/, exactly as the
     command writes its --out. A failed bag is a row with its error (exit

@@ -25,22 +25,26 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
               help="Robot frame a TUM trajectory describes (default: /odom's child frame, or base_footprint/base_link).")
 @click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
               help=SCAN_FRAME_OFFSET_HELP)
+@click.option("--no-mcap", "no_mcap", is_flag=True, help="Do not write results.mcap.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, resolution: float, max_range: float | None,
-         base_frame: str | None, scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
+         base_frame: str | None, scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool,
+         force: bool) -> None:
     """Build an occupancy grid of BAG's laser scans ("mapping with known poses").
 
     Writes OUT/map.pgm + OUT/map.yaml (ROS map_server / nav2 format: load with
-    nav2's map_server), OUT/map.png (the map with the scan path) and
+    nav2's map_server), OUT/map.png (the map with the scan path),
     OUT/summary.json (scans used and skipped by reason, grid size, and for
-    simulated bags the map scored against the true world).
+    simulated bags the map scored against the true world) and OUT/results.mcap
+    (open in Foxglove, or `ros2 bag play`: /map latched as map_server publishes
+    it, /trajectory, /tf, /tf_static and the scans at their stamps).
 
     \b
     Example:
       bagtools grid out/sim --out out/grid
       bagtools grid out/sim --out out/grid_odom --frame odom --force
       bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum
-      bagtools grid real.bag --out grid --scan-frame-offset -0.064,0,0
+      bagtools grid real.bag --out grid --scan-frame-offset -0.064,0,0 --no-mcap
     """
     from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
     from bagtools.outputs import check_outputs
@@ -50,10 +54,10 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     options = GridMapOptions(topic=topic, frame=frame or GridMapOptions.default_frame(poses), poses=poses,
                              resolution=resolution, max_range_m=max_range, base_frame=base_frame,
                              scan_frame_offset=scan_frame_offset)
-    result = GridMapPipeline(bag, options).run()
+    result = GridMapPipeline(bag, options, keep_scans=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
-    write_grid_map(result, out_dir, force)
+    write_grid_map(result, out_dir, force, mcap=not no_mcap)
     s, g = result.summary, result.summary["grid"]
     click.echo(f"{s['scans_used']} of {s['scans_total']} scans mapped, skipped {json.dumps(s['scans_skipped'])}; "
                f"{g['rows']}x{g['cols']} cells of {g['cell_size_m']:g} m in {out_dir}/map.yaml")

@@ -19,19 +19,24 @@ import click
 @click.option("--voxel", type=float, default=None, help="Voxel-downsample the map to this edge length [m].")
 @click.option("--max-range", type=float, default=None, help="Drop points farther than this from the sensor [m].")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random sampling.")
+@click.option("--no-mcap", "no_mcap", is_flag=True, help="Do not write results.mcap.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample: float | None, voxel: float | None,
-              max_range: float | None, seed: int, force: bool) -> None:
+              max_range: float | None, seed: int, no_mcap: bool, force: bool) -> None:
     """Build a point-cloud map of BAG in a fixed frame ("mapping with known poses").
 
-    Writes OUT/cloud_map.pcd and .ply (Open3D, CloudCompare), cloud_map.png (top
-    and side views) and summary.json (clouds used and skipped by reason, points,
-    and for simulated bags the distance of the map to the true surfaces).
+    Writes OUT/cloud_map.pcd and .ply (PCL, Open3D, CloudCompare: x y z, and
+    intensity and rgb when the sensor gave them, averaged per voxel; the frame in
+    a header comment), cloud_map.png (top and side views), summary.json (clouds
+    used and skipped by reason, points, and for simulated bags the distance of
+    the map to the true surfaces) and results.mcap (open in Foxglove, or
+    `ros2 bag play`: /cloud_map, /trajectory, /tf, /tf_static and each cloud
+    that went into the map, on its topic at its stamp).
 
     \b
     Example:
       bagtools map-cloud out/turtlebot3_sim --out out/cloud_map --voxel 0.02
-      bagtools map-cloud run.mcap --out odom_map --frame odom --stamp latest
+      bagtools map-cloud run.mcap --out odom_map --frame odom --stamp latest --no-mcap
     """
     from bagtools.cloudmap import CLOUD_MAP_FILES, CloudMapOptions, CloudMapPipeline, write_cloud_map
     from bagtools.outputs import check_outputs
@@ -40,10 +45,10 @@ def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample
 
     options = CloudMapOptions(topic=topic, frame=frame, stamp=stamp, sample=sample, voxel_m=voxel,
                               max_range_m=max_range, seed=seed)
-    result = CloudMapPipeline(bag, options).run()
+    result = CloudMapPipeline(bag, options, keep_inputs=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
-    write_cloud_map(result, out_dir, force)
+    write_cloud_map(result, out_dir, force, mcap=not no_mcap)
     s = result.summary
     click.echo(f"{s['clouds_used']} clouds mapped, skipped {json.dumps(s['clouds_skipped'])}; "
                f"{s['points_out']} points in {out_dir}/cloud_map.pcd")

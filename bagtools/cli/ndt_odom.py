@@ -18,6 +18,8 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 @click.option("--no-search", "no_search", is_flag=True,
               help="Never run the grid search, even when no guess can be trusted (faster, less robust).")
 @click.option("--no-odometry", "no_odometry", is_flag=True, help="Ignore the bag's wheel odometry.")
+@click.option("--holonomic", is_flag=True,
+              help="The laser is handheld or flies: its steps need not follow a wheeled robot's arcs.")
 @click.option("--reference", type=click.Choice(["previous", "keyframe"]), default="keyframe", show_default=True,
               help="Match against the previous scan, or a keyframe submap replaced after 0.5 m, 20 deg or a falling "
                    "score.")
@@ -32,10 +34,12 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 @click.option("--max-turn-rate", type=float, default=2.0, show_default=True, help="Fastest the robot turns [rad/s].")
 @click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
               help=SCAN_FRAME_OFFSET_HELP)
+@click.option("--no-mcap", "no_mcap", is_flag=True, help="Do not write results.mcap.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, reference: str,
+def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_odometry: bool, holonomic: bool,
+             reference: str,
              cell_size: float | None, cell_model: str, min_score: float, max_speed: float, max_turn_rate: float,
-             scan_frame_offset: tuple[float, float, float] | None, force: bool) -> None:
+             scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool, force: bool) -> None:
     """Laser odometry of BAG: match its scans in order by 2D NDT and chain the motions.
 
     Each scan starts from the best guess (wheel odometry, constant velocity,
@@ -46,16 +50,18 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
 
     Writes OUT/trajectory.tum (the robot base in the odometry frame, TUM format
     for evo), odometry.tum (wheel odometry at the scan stamps), ground_truth.tum
-    (bags with /ground_truth), trajectory.png, scan_map.png and summary.json
+    (bags with /ground_truth), trajectory.png, scan_map.png, summary.json
     (matches, searches, fallbacks, rejected odometry, time per pair, and APE /
     RPE per metre of NDT and odometry against the ground truth, equal to
-    evo_ape / evo_rpe on the same files).
+    evo_ape / evo_rpe on the same files) and results.mcap (open in Foxglove, or
+    `ros2 bag play`: the trajectories as nav_msgs/Path, /tf, /tf_static, the
+    scans at their stamps and /cloud_map, the scans at their NDT poses).
 
     \b
     Example:
       bagtools ndt-odom out/sim --out out/ndt
       evo_ape tum out/ndt/ground_truth.tum out/ndt/trajectory.tum
-      bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --no-odometry
+      bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --no-odometry --no-mcap
     """
     from bagtools.errors import BagtoolsError
     from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
@@ -65,14 +71,14 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
 
     options = NdtOdomOptions(topic=topic, init=init, search=not no_search, use_odometry=not no_odometry,
                              reference=reference, cell_size_m=cell_size, cell_model=cell_model, min_score=min_score,
-                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate,
+                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate, wheeled=not holonomic,
                              scan_frame_offset=scan_frame_offset)
-    result = NdtOdomPipeline(bag, options).run()
+    result = NdtOdomPipeline(bag, options, keep_scans=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
     if result.problem is not None:  # a failed run changes nothing in --out
         raise BagtoolsError(result.problem, bag)
-    written = write_ndt_odom(result, out_dir, force)
+    written = write_ndt_odom(result, out_dir, force, mcap=not no_mcap)
     s = result.summary
     click.echo(f"{s['scans_used']} scans: {s['pairs_matched']} pairs matched ({s['searched']} needed a search), "
                f"{s['fallbacks']} fell back to their guess, {s['odometry_rejected']} odometry steps rejected; "

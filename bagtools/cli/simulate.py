@@ -18,21 +18,27 @@ import click
 @click.option("--cloud-rate", type=float, default=2.0, show_default=True, help="Depth cloud rate [Hz].")
 @click.option("--cloud-size", default="160x120", show_default=True, help="Depth image size WIDTHxHEIGHT.")
 @click.option("--no-cloud", is_flag=True, help="Do not simulate the depth camera.")
-@click.option("--ros-distro", type=click.Choice(["humble", "jazzy"]), default="jazzy", show_default=True,
-              help="Message definitions and metadata version (humble: version 5).")
+@click.option("--ros-distro", type=click.Choice(["humble", "jazzy"]), default="humble", show_default=True,
+              help="Write the bag as this distro's rosbag2 does. humble: metadata version 5, which Humble and "
+                   "Jazzy both read; jazzy: version 9 as Jazzy writes it, which Humble cannot open.")
 @click.option("--world", default="turtlebot3_world", show_default=True, help="Packaged world name or a world JSON file.")
 @click.option("--force", is_flag=True, help="Overwrite OUT if it exists.")
 def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, max_linear: float, max_angular: float,
              cloud_rate: float, cloud_size: str, no_cloud: bool, ros_distro: str, world: str, force: bool) -> None:
     """Simulate a TurtleBot3 Waffle and write the rosbag2 (MCAP) directory OUT.
 
-    Topics: /tf, /tf_static, /odom, /scan, /camera/depth/points, /ground_truth,
-    /clicked_point and /simulation/world (the world and settings, for scoring).
+    Topics: /tf, /tf_static, /robot_description, /joint_states, /odom, /imu, /scan,
+    /camera/depth/points, /camera/depth/camera_info, /ground_truth, /clicked_point and
+    /simulation/world (the world and settings, for scoring). The tf tree is the one a real
+    Waffle's robot_state_publisher gives (ROBOTIS' URDF).
+
+    The default bag (--ros-distro humble) opens in Humble and in Jazzy; use --ros-distro
+    jazzy for the metadata Jazzy writes (Humble's rosbag2 rejects it).
 
     \b
     Example:
       bagtools simulate out/sim --duration 120 --route figure8 --odom-noise high
-      bagtools simulate out/sim_humble --ros-distro humble --no-cloud --force
+      bagtools simulate out/sim_jazzy --ros-distro jazzy --no-cloud --force
     """
     from simulate.pipeline import SimConfig, parse_cloud_size, simulate_bag
 

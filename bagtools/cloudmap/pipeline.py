@@ -19,8 +19,9 @@ from typing import Literal
 
 import numpy as np
 
-from bagtools.cloudmap.accumulator import MIN_VOXEL_M, PointAccumulator, random_subset
+from bagtools.cloudmap.accumulator import MIN_VOXEL_M, MapCloud, PointAccumulator, random_indices
 from bagtools.dataset import SensorStream
+from bagtools.io import LaserScanArrays
 from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
@@ -66,13 +67,43 @@ class CloudMapOptions:
             raise BagtoolsError(f"--stamp must be 'message' or 'latest', got {self.stamp!r}")
 
 
+@dataclass(frozen=True)
+class PlacedInput:
+    """One message that went into the map, as it went in (kept for results.mcap).
+
+    ``points`` (N,3) float32 in the sensor frame ``frame_id`` after the range
+    cut and sampling, with its ``intensity``/``rgb`` when the sensor gave them
+    (``scan`` is the LaserScan itself for a scan topic); ``T_frame_sensor``
+    (4,4) placed it in the map's frame at header ``stamp_ns``; ``base_frame``
+    and ``T_base_sensor`` (4,4) are the robot base it hangs from in tf (None when
+    tf does not connect them).
+    """
+
+    stamp_ns: int
+    frame_id: str
+    points: np.ndarray
+    intensity: np.ndarray | None
+    rgb: np.ndarray | None
+    scan: LaserScanArrays | None
+    T_frame_sensor: np.ndarray
+    base_frame: str | None
+    T_base_sensor: np.ndarray | None
+
+
 @dataclass
 class CloudMapResult:
-    """The map (N,3) float32 in ``options.frame``, the sensor positions used, and the summary."""
+    """The map in ``options.frame`` (points (N,3) float32, intensity and colour when the sensor gave them),
+    the sensor positions used, the summary, and (when asked for) every message as it went into the map."""
 
-    points: np.ndarray
+    cloud: MapCloud
     sensor_path: np.ndarray
     summary: dict = field(default_factory=dict)
+    inputs: list[PlacedInput] = field(default_factory=list)
+
+    @property
+    def points(self) -> np.ndarray:
+        """The map's points (N,3) float32."""
+        return self.cloud.points
 
 
 def _skip_reason(err: TransformException) -> str:
@@ -89,9 +120,13 @@ def _skip_reason(err: TransformException) -> str:
 class CloudMapPipeline:
     """Builds one point-cloud map from one bag (see the module docstring)."""
 
-    def __init__(self, bag_path: str | Path, options: CloudMapOptions) -> None:
+    def __init__(self, bag_path: str | Path, options: CloudMapOptions, keep_inputs: bool = False) -> None:
+        """``keep_inputs``: keep every placed message's points (:attr:`CloudMapResult.inputs`, for results.mcap)."""
         self.bag_path = Path(bag_path)
         self.options = options
+        self.keep_inputs = keep_inputs
+        self.inputs: list[PlacedInput] = []
+        self._base_of: dict[str, np.ndarray | None] = {}
         self.rng = np.random.default_rng(options.seed)
         self.accumulator = PointAccumulator(options.voxel_m)
         self.skipped: Counter[str] = Counter()
@@ -114,14 +149,15 @@ class CloudMapPipeline:
                 invalid = self.buffer.invalid_note(*sorted(self.buffer.invalid_dropped))
                 raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
                                     f"({reasons}), so there is no map to write{invalid}", bag.path)
-            points = self.accumulator.points()
+            cloud = self.accumulator.cloud()
+            points = cloud.points
             if points.shape[0] == 0:
                 limit = f" within --max-range {self.options.max_range_m} m" if self.options.max_range_m is not None else ""
                 raise BagtoolsError(f"none of the {self.clouds_used} placed clouds on {self.options.topic} has a point"
                                     f"{limit}, so there is no map to write", bag.path)
-            summary = self._summary(points)
+            summary = self._summary(cloud)
             summary.update(self._evaluate(bag, points))
-        return CloudMapResult(points, np.array(self._sensor_path).reshape(-1, 3), summary)
+        return CloudMapResult(cloud, np.array(self._sensor_path).reshape(-1, 3), summary, self.inputs)
 
     # -- steps -------------------------------------------------------------------
 
@@ -143,8 +179,9 @@ class CloudMapPipeline:
             known = ", ".join(self.buffer.frames)
             raise BagtoolsError(f"frame '{self.options.frame}' is not in the tf tree (frames: {known})", bag.path)
 
-    def _pose(self, sensor_frame: str, stamp_ns: int, log_time_ns: int) -> np.ndarray:
-        """T_frame_sensor for one message, by the chosen stamp policy (raises TransformException).
+    def _pose(self, sensor_frame: str, stamp_ns: int, log_time_ns: int) -> tuple[np.ndarray, str, int]:
+        """(T_frame_sensor, the tf frame used for the sensor, the stamp looked up at) for one message, by the
+        chosen stamp policy (raises TransformException).
 
         A sensor frame the bag's tf lacks is taken to be the robot base frame, with a warning.
         """
@@ -158,13 +195,25 @@ class CloudMapPipeline:
         if self.options.stamp == "latest":
             chain = self.buffer.chain_edges(target, sensor_frame)
             stamp_ns = self._arrival.latest_common_stamp(chain, log_time_ns)
-        return self.buffer.lookup(target, sensor_frame, stamp_ns)
+        return self.buffer.lookup(target, sensor_frame, stamp_ns), sensor_frame, stamp_ns
+
+    def _base_sensor(self, tf_frame: str, stamp_ns: int) -> np.ndarray | None:
+        """T_base_sensor of a sensor's tf frame (looked up once per frame), None when tf does not connect them."""
+        if tf_frame not in self._base_of:
+            T = None
+            if self.base_frame and self.buffer.has_frame(self.base_frame):
+                try:
+                    T = self.buffer.lookup(self.base_frame, tf_frame, stamp_ns)
+                except TransformException:
+                    T = None
+            self._base_of[tf_frame] = T
+        return self._base_of[tf_frame]
 
     def _map_clouds(self, bag: BagReader) -> None:
         opts = self.options
         self.sample = opts.sample if opts.sample is not None else (
             1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
-        self.stream = SensorStream(bag, opts.topic, desc="mapping")
+        self.stream = SensorStream(bag, opts.topic, desc="mapping", attributes=True)
         for item in self.stream:
             self.sensor_frames.add(item.frame_id)
             self.points_in += item.points.shape[0]
@@ -172,18 +221,27 @@ class CloudMapPipeline:
                 self.skipped["empty cloud"] += 1
                 continue
             try:
-                T_frame_sensor = self._pose(item.frame_id, item.stamp_ns, item.log_time_ns)
+                T_frame_sensor, tf_frame, stamp_used = self._pose(item.frame_id, item.stamp_ns, item.log_time_ns)
             except TransformException as err:
                 self.skipped[_skip_reason(err)] += 1
                 continue
-            points = item.points
+            sensed = MapCloud(item.points, item.intensity, item.rgb)
             if opts.max_range_m is not None:
-                points = points[np.einsum("ij,ij->i", points, points) <= opts.max_range_m**2]
-            points = random_subset(points, self.sample, self.rng)
+                points = item.points
+                sensed = sensed.select(np.einsum("ij,ij->i", points, points) <= opts.max_range_m**2)
+            index = random_indices(len(sensed), self.sample, self.rng)
+            if index is not None:
+                sensed = sensed.select(index)
             R, t = T_frame_sensor[:3, :3], T_frame_sensor[:3, 3]
-            self.accumulator.add((points.astype(np.float64) @ R.T + t).astype(np.float32))
+            self.accumulator.add((sensed.points.astype(np.float64) @ R.T + t).astype(np.float32), sensed.intensity,
+                                 sensed.rgb)
             self._sensor_path.append(t.copy())
             self.clouds_used += 1
+            if self.keep_inputs:
+                T_base_sensor = self._base_sensor(tf_frame, stamp_used)
+                self.inputs.append(PlacedInput(item.stamp_ns, item.frame_id, sensed.points, sensed.intensity, sensed.rgb,
+                                               item.scan, T_frame_sensor,
+                                               self.base_frame if T_base_sensor is not None else None, T_base_sensor))
         self.skipped.update(self.stream.skip_counts)
 
     def _evaluate(self, bag: BagReader, points: np.ndarray) -> dict:
@@ -214,7 +272,10 @@ class CloudMapPipeline:
         result["accuracy_vs_truth_m"] = _distance_stats(world.surface_distance_m(in_map))
         return result
 
-    def _summary(self, points: np.ndarray) -> dict:
+    def _summary(self, cloud: MapCloud) -> dict:
+        if self.accumulator.dropped:
+            self.warnings.append(f"{' and '.join(sorted(self.accumulator.dropped))} left out of the map: some messages on "
+                                 f"{self.options.topic} have it and some do not")
         return {
             "bag": str(self.bag_path),
             "topic": self.options.topic,
@@ -224,7 +285,8 @@ class CloudMapPipeline:
             "clouds_skipped": dict(self.skipped),
             "points_in": self.points_in,
             "points_accumulated": self.accumulator.points_added,
-            "points_out": int(points.shape[0]),
+            "points_out": len(cloud),
+            "fields": cloud.fields,
             "sample_fraction": self.sample,
             "options": asdict(self.options),
             "warnings": self.warnings,

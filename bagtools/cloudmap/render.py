@@ -1,19 +1,10 @@
-"""Pictures and files of a point-cloud map: PNG top and side views, PCD and PLY through Open3D."""
+"""Pictures of a point-cloud map: PNG top and side views (the files are in :mod:`bagtools.cloudmap.files`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
-
-
-def write_point_cloud(path: Path, points: np.ndarray) -> None:
-    """Write (N,3) points as PCD or PLY (by suffix) with Open3D, binary."""
-    import open3d as o3d
-
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
-    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
-        raise OSError(f"Open3D could not write {path}")
 
 
 def _grid_edges(u: np.ndarray, v: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray]:

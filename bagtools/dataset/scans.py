@@ -128,12 +128,20 @@ class ScanStream:
 
 @dataclass(frozen=True)
 class SensorPoints:
-    """One message's points: ``points`` (N,3) float32 in ``frame_id`` at header ``stamp_ns``; ``log_time_ns`` is its bag time."""
+    """One message's points: ``points`` (N,3) float32 in ``frame_id`` at header ``stamp_ns``; ``log_time_ns`` is its bag time.
+
+    With attributes asked for, ``intensity`` (N,) float32 and ``rgb`` (N,3) uint8
+    are aligned with ``points`` when the sensor gave them (None otherwise);
+    ``scan`` is the LaserScan the points come from (None for a PointCloud2).
+    """
 
     stamp_ns: int
     log_time_ns: int
     frame_id: str
     points: np.ndarray
+    intensity: np.ndarray | None = None
+    rgb: np.ndarray | None = None
+    scan: LaserScanArrays | None = None
 
 
 class SensorStream:
@@ -142,13 +150,16 @@ class SensorStream:
     A LaserScan gives its valid returns at z = 0 of the scan frame (through a
     :class:`ScanStream`); a PointCloud2 its finite, plausible points. Messages
     that cannot be decoded are skipped and counted; :meth:`warnings` says so.
+    With ``attributes``, each message's intensities (a LaserScan's, when it has
+    one per beam) and colours come along (see :func:`~bagtools.io.decode_pointcloud2`).
     """
 
-    def __init__(self, bag: BagReader, topic: str, desc: str | None = "mapping") -> None:
+    def __init__(self, bag: BagReader, topic: str, desc: str | None = "mapping", attributes: bool = False) -> None:
         require_topic(bag, topic, POINTCLOUD2_TYPES + LASERSCAN_TYPES, "PointCloud2 or LaserScan")
         self.bag = bag
         self.topic = topic
         self.desc = desc
+        self.attributes = attributes
         self.is_scan = bag.topics[topic].msgtype in LASERSCAN_TYPES
         self.scans = ScanStream(bag, topic, desc=desc) if self.is_scan else None
         self.total = bag.topics[topic].count
@@ -159,23 +170,28 @@ class SensorStream:
     def __iter__(self) -> Iterator[SensorPoints]:
         if self.scans is not None:
             for item in self.scans:
-                xy = item.scan.points_xy()
+                scan = item.scan
+                xy = scan.points_xy()
                 points = np.zeros((xy.shape[0], 3), dtype=np.float32)
                 points[:, :2] = xy
-                yield SensorPoints(item.scan.stamp_ns, item.log_time_ns, item.scan.frame_id, points)
+                intensity = None
+                if self.attributes and scan.intensities.size == scan.ranges_m.size and scan.ranges_m.size:
+                    intensity = np.asarray(scan.intensities[scan.valid], dtype=np.float32)
+                yield SensorPoints(scan.stamp_ns, item.log_time_ns, scan.frame_id, points, intensity,
+                                   scan=scan if self.attributes else None)
             return
         records: Iterable = self.bag.messages([self.topic])
         if self.desc is not None:
             records = progress(records, total=self.total, desc=self.desc, unit="cloud")
         for rec in records:
             try:
-                cloud = decode_pointcloud2(rec.msg)
+                cloud = decode_pointcloud2(rec.msg, attributes=self.attributes)
             except DecodeError as err:
                 self.skipped[f"undecodable cloud: {err.problem}"] += 1
                 continue
             self.implausible_points += cloud.n_implausible
             self.notes.update(cloud.notes)
-            yield SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points)
+            yield SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points, cloud.intensity, cloud.rgb)
 
     @property
     def skip_counts(self) -> Counter[str]:

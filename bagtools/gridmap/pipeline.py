@@ -40,12 +40,12 @@ from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses,
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
-from bagtools.io import LASERSCAN_TYPES, BagReader, open_bag, read_tf_arrays
+from bagtools.io import LASERSCAN_TYPES, BagReader, LaserScanArrays, open_bag, read_tf_arrays
 from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
-from bagtools.tf import TfBuffer
+from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import guess_base_frame, repair_dynamic_tf
-from bagtools.trajectory import read_tum, read_tum_frames
+from bagtools.trajectory import Trajectory, read_tum, read_tum_frames
 from bagtools.transforms import pose2tform
 
 SKIP_NO_VALID_RANGES = "no valid ranges"
@@ -55,19 +55,40 @@ SCORE_TOLERANCE_CELLS = 1
 
 @dataclass
 class GridMapResult:
-    """The grid (in ``options.frame``), the scan positions used ((N,2) metres, same frame) and the summary."""
+    """The grid (in ``options.frame``), the scan positions used ((N,2) metres, same frame) and the summary.
+
+    With ``keep_scans`` the pipeline also keeps what results.mcap shows: ``scans``
+    (every scan inserted, as decoded), ``T_frame_base`` (N,4,4) the robot base
+    at each of their stamps, ``base_frame`` and ``T_base_scan`` (scan frame id ->
+    (4,4), the laser mount used; the base stands for a scan frame tf lacks).
+    """
 
     grid: OccupancyGrid
     scan_path_xy: np.ndarray
     summary: dict = field(default_factory=dict)
+    scans: list[LaserScanArrays] = field(default_factory=list)
+    T_frame_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    base_frame: str | None = None
+    T_base_scan: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class GridMapPipeline:
-    """Builds one occupancy grid from one bag (see the module docstring)."""
+    """Builds one occupancy grid from one bag (see the module docstring).
 
-    def __init__(self, bag_path: str | Path, options: GridMapOptions) -> None:
+    ``trajectory``: poses of the robot base in ``options.frame`` computed by the
+    caller (e.g. ``bagtools slam``'s optimized trajectory), used as a TUM file
+    named by ``options.poses`` would be; ``options.poses`` then only labels them.
+    ``keep_scans``: keep every inserted scan and its pose (for results.mcap).
+    """
+
+    def __init__(self, bag_path: str | Path, options: GridMapOptions, trajectory: Trajectory | None = None,
+                 keep_scans: bool = False) -> None:
         self.bag_path = Path(bag_path)
         self.options = options
+        self.trajectory = trajectory
+        self.keep_scans = keep_scans
+        self._kept: list[LaserScanArrays] = []
+        self._kept_T: list[np.ndarray] = []
         self.grid: OccupancyGrid | None = None
         self.skipped: Counter[str] = Counter()
         self.scans_total = 0
@@ -97,7 +118,10 @@ class GridMapPipeline:
             summary = self._summary(grid)
             summary["elapsed_s"] = round(time.perf_counter() - t0, 3)
             summary.update(self._evaluate(bag, grid))
-        return GridMapResult(grid, np.array(self._path).reshape(-1, 2), summary)
+            result = GridMapResult(grid, np.array(self._path).reshape(-1, 2), summary)
+            if self.keep_scans:
+                self._robot_poses(result)
+        return result
 
     # -- steps -------------------------------------------------------------------
 
@@ -105,7 +129,7 @@ class GridMapPipeline:
         dynamic, static = read_tf_arrays(bag)
         dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
-        if self.options.poses_kind != POSES_TF:
+        if self.options.poses_kind != POSES_TF or self.trajectory is not None:
             return
         if not self.buffer.frames:
             raise BagtoolsError("bag has no /tf or /tf_static data, so scans cannot be placed in a frame "
@@ -121,20 +145,20 @@ class GridMapPipeline:
     def _pose_source(self, bag: BagReader) -> ScanPoseSource:
         opts = self.options
         offset = None if opts.scan_frame_offset is None else pose2tform(np.asarray(opts.scan_frame_offset))
-        if opts.poses_kind == POSES_TF:
+        if opts.poses_kind == POSES_TF and self.trajectory is None:
             self.base_frame = self._base_frame(bag)
             if offset is not None and not self.base_frame:
                 raise BagtoolsError("--scan-frame-offset needs the robot base frame: give --base-frame", bag.path)
             return TfScanPoses(self.buffer, opts.frame, self.base_frame, offset)
-        if opts.poses_kind == POSES_GROUND_TRUTH:
+        if opts.poses_kind == POSES_GROUND_TRUTH and self.trajectory is None:
             truth = read_ground_truth(bag, warnings=self.warnings)
             if truth is None:
                 raise BagtoolsError("--poses ground-truth needs a /ground_truth topic (written by bagtools simulate)",
                                     bag.path)
             stamps, T_map_base, self.base_frame = truth
             return TrajectoryScanPoses(stamps, T_map_base, opts.frame, self.base_frame, self.buffer, offset)
-        trajectory = read_tum(opts.poses)
-        named = read_tum_frames(opts.poses)  # what ndt-odom and slam record in their TUM files
+        trajectory = self.trajectory if self.trajectory is not None else read_tum(opts.poses)
+        named = None if self.trajectory is not None else read_tum_frames(opts.poses)  # as ndt-odom and slam write
         if named is not None and named[0] != opts.frame:
             raise BagtoolsError(f"the trajectory is in frame {named[0]!r}, not {opts.frame!r}: give --frame {named[0]}",
                                 opts.poses)
@@ -239,6 +263,34 @@ class GridMapPipeline:
         self.max_ranges_m.add(round(max_range, 6))
         self._path.append(T[:2, 3].copy())
         self._scan_z.append(float(T[2, 3]))
+        if self.keep_scans:
+            self._kept.append(scan)
+            self._kept_T.append(T)
+
+    def _robot_poses(self, result: GridMapResult) -> None:
+        """The kept scans, the base's pose at each and the laser mounts: T_frame_base = T_frame_scan @ inv(T_base_scan)."""
+        base = getattr(self, "base_frame", None)
+        mounts: dict[str, np.ndarray] = {}
+        for scan in self._kept:
+            if scan.frame_id not in mounts:
+                mounts[scan.frame_id] = self._mount(base, scan.frame_id, scan.stamp_ns)
+        T_frame_scan = np.array(self._kept_T).reshape(-1, 4, 4)
+        inverse = {frame: np.linalg.inv(T) for frame, T in mounts.items()}
+        T_scan_base = np.array([inverse[scan.frame_id] for scan in self._kept]).reshape(-1, 4, 4)
+        result.scans, result.base_frame, result.T_base_scan = self._kept, base, mounts
+        result.T_frame_base = T_frame_scan @ T_scan_base
+
+    def _mount(self, base: str | None, scan_frame: str, stamp_ns: int) -> np.ndarray:
+        """T_base_scan as the poses used it: --scan-frame-offset, else tf, else identity (the base stands for the scan)."""
+        if self.options.scan_frame_offset is not None:
+            return pose2tform(np.asarray(self.options.scan_frame_offset))
+        if base and base != scan_frame and self.buffer.has_frame(base) and self.buffer.has_frame(scan_frame):
+            for stamp in (stamp_ns, None):
+                try:
+                    return self.buffer.lookup(base, scan_frame, stamp)
+                except TransformException:
+                    continue
+        return np.eye(4)
 
     def _nothing_posed_message(self) -> str:
         topic, frame = self.options.topic, self.options.frame

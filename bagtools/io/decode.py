@@ -50,7 +50,8 @@ class LaserScanArrays:
     between scans of the same geometry); ``range_min_m`` and ``range_max_m``
     are the message's limits made sane (at least 0, at most
     :data:`MAX_PLAUSIBLE_RANGE_M`); ``valid`` (N,) bool: finite, above 0 and
-    within them. ``notes`` says what in the header was implausible and how it
+    within them. ``angle_increment_rad``, ``time_increment_s`` and ``scan_time_s``
+    are the message's. ``notes`` says what in the header was implausible and how it
     was read (empty for a sound scan); the same notes come back for every scan
     of one geometry, so callers can count them.
     """
@@ -63,6 +64,9 @@ class LaserScanArrays:
     range_max_m: float
     intensities: np.ndarray
     notes: tuple[str, ...] = ()
+    angle_increment_rad: float = 0.0
+    time_increment_s: float = 0.0
+    scan_time_s: float = 0.0
 
     @property
     def valid(self) -> np.ndarray:
@@ -137,6 +141,9 @@ def decode_laserscan(msg: Any) -> LaserScanArrays:
         range_max_m=high,
         intensities=np.asarray(msg.intensities, dtype=np.float32),
         notes=notes,
+        angle_increment_rad=float(msg.angle_increment),
+        time_increment_s=float(msg.time_increment),
+        scan_time_s=float(msg.scan_time),
     )
 
 
@@ -144,9 +151,12 @@ def decode_laserscan(msg: Any) -> LaserScanArrays:
 class CloudArrays:
     """A PointCloud2's finite x, y, z points: ``points`` (N,3) float32 in ``frame_id``.
 
-    ``n_implausible`` counts finite points dropped for a coordinate beyond
-    :data:`MAX_PLAUSIBLE_COORDINATE_M` (damage, or data of the other byte order);
-    ``notes`` says what in the header disagrees with the data (it was read anyway).
+    ``intensity`` (N,) float32 and ``rgb`` (N,3) uint8 are the point's
+    intensity and colour, aligned with ``points``, when the cloud has them and
+    they were asked for (None otherwise). ``n_implausible`` counts finite
+    points dropped for a coordinate beyond :data:`MAX_PLAUSIBLE_COORDINATE_M`
+    (damage, or data of the other byte order); ``notes`` says what in the
+    header disagrees with the data (it was read anyway).
     """
 
     stamp_ns: int
@@ -154,6 +164,75 @@ class CloudArrays:
     points: np.ndarray
     n_implausible: int = 0
     notes: tuple[str, ...] = ()
+    intensity: np.ndarray | None = None
+    rgb: np.ndarray | None = None
+
+
+def _point_bytes(msg: Any) -> tuple[np.ndarray, int]:
+    """The cloud's data as one row of ``point_step`` bytes per point (padded rows skipped), and the point count.
+
+    Raises :class:`DecodeError` for a layout the data cannot hold.
+    """
+    height, width, point_step, row_step = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
+    n_points = height * width
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if n_points == 0:
+        return data[:0], 0
+    if point_step <= 0 or row_step < width * point_step or data.size < (height - 1) * row_step + width * point_step:
+        raise DecodeError(
+            f"PointCloud2 layout is inconsistent: {height}x{width} points, point_step {point_step}, "
+            f"row_step {row_step}, {data.size} data bytes"
+        )
+    if row_step != width * point_step:  # padded rows: a strided view of the rows (the checks above bound it)
+        rows = np.lib.stride_tricks.as_strided(data, shape=(height, width * point_step), strides=(row_step, 1),
+                                               writeable=False)
+        data = rows.reshape(-1)
+    return data, n_points
+
+
+def _field_view(msg: Any, data: np.ndarray, n_points: int, field: Any, kind: str | None = None) -> np.ndarray | None:
+    """(n_points,) view of one scalar PointField (its first element), read as numpy ``kind`` (default: its
+    datatype's), or None when unusable (unknown type, not inside the point)."""
+    kind = kind or _POINTFIELD_DTYPES.get(int(field.datatype))
+    point_step, offset = int(msg.point_step), int(field.offset)
+    if kind is None or offset < 0 or offset + int(kind[1:]) > point_step:
+        return None
+    order = ">" if msg.is_bigendian else "<"
+    dtype = np.dtype({"names": ["v"], "formats": [order + kind], "offsets": [offset], "itemsize": point_step})
+    return np.frombuffer(data, dtype=dtype, count=n_points)["v"]
+
+
+#: PointField names read as a point's intensity, in order of preference.
+INTENSITY_FIELDS = ("intensity", "intensities", "i", "reflectivity")
+#: PointField names of a packed colour (PCL's convention: 0x00RRGGBB in a float32 or uint32).
+PACKED_RGB_FIELDS = ("rgb", "rgba")
+
+
+def _attribute_views(msg: Any, data: np.ndarray, n_points: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(intensity (N,) view or None, rgb (N,3) uint8 or None) of every point of the cloud."""
+    fields = {f.name: f for f in msg.fields}
+    intensity = None
+    for name in INTENSITY_FIELDS:
+        if name in fields and (intensity := _field_view(msg, data, n_points, fields[name])) is not None:
+            break
+    rgb = None
+    for name in PACKED_RGB_FIELDS:
+        field = fields.get(name)
+        if field is None or int(field.datatype) not in (6, 7):  # uint32 or float32 holding 0x00RRGGBB
+            continue
+        packed = _field_view(msg, data, n_points, field, kind="u4")  # a float32's bits are the packed colour
+        if packed is not None:
+            packed = packed.astype(np.uint32)
+            rgb = np.column_stack(((packed >> 16) & 0xFF, (packed >> 8) & 0xFF, packed & 0xFF)).astype(np.uint8)
+            break
+    if rgb is None and all(c in fields for c in "rgb"):  # separate r, g, b channels: integers 0..255, floats 0..1
+        views = [_field_view(msg, data, n_points, fields[c]) for c in "rgb"]
+        if all(v is not None for v in views):
+            channels = np.column_stack(views).astype(np.float64)
+            if views[0].dtype.kind == "f":
+                channels = np.nan_to_num(channels * 255.0)
+            rgb = np.clip(np.rint(channels), 0, 255).astype(np.uint8)
+    return intensity, rgb
 
 
 def _xyz_view(msg: Any) -> np.ndarray:
@@ -169,20 +248,10 @@ def _xyz_view(msg: Any) -> np.ndarray:
         if kind is None:
             raise DecodeError(f"PointCloud2 field {name} has unknown datatype {fields[name].datatype}")
         kinds.append(kind)
-    height, width, point_step, row_step = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
-    n_points = height * width
-    data = np.asarray(msg.data, dtype=np.uint8)
+    point_step = int(msg.point_step)
+    data, n_points = _point_bytes(msg)
     if n_points == 0:
         return np.empty((0, 3), dtype=np.float32)
-    if point_step <= 0 or row_step < width * point_step or data.size < (height - 1) * row_step + width * point_step:
-        raise DecodeError(
-            f"PointCloud2 layout is inconsistent: {height}x{width} points, point_step {point_step}, "
-            f"row_step {row_step}, {data.size} data bytes"
-        )
-    if row_step != width * point_step:  # padded rows: a strided view of the rows (the checks above bound it)
-        rows = np.lib.stride_tricks.as_strided(data, shape=(height, width * point_step), strides=(row_step, 1),
-                                               writeable=False)
-        data = rows.reshape(-1)
     offsets = [int(fields[n].offset) for n in "xyz"]
     for name, offset, kind in zip("xyz", offsets, kinds):
         if offset < 0 or offset + int(kind[1:]) > point_step:
@@ -196,17 +265,25 @@ def _xyz_view(msg: Any) -> np.ndarray:
     return np.column_stack([structured[n] for n in "xyz"])
 
 
-def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
+def decode_pointcloud2(msg: Any, keep_nan: bool = False, attributes: bool = False) -> CloudArrays:
     """sensor_msgs/PointCloud2 -> :class:`CloudArrays` with (N,3) float32 points.
 
     Honours ``fields`` (x, y, z at any offsets and numeric types), ``point_step``,
     ``row_step`` padding and ``is_bigendian``. Points with a non-finite or
     implausible coordinate are dropped unless ``keep_nan`` (then the result is
-    height*width points). Raises :class:`DecodeError` for a layout the data
-    cannot hold.
+    height*width points). With ``attributes``, the points' intensity (a field
+    named in :data:`INTENSITY_FIELDS`, any numeric type, as float32) and colour
+    (a packed ``rgb``/``rgba`` field, PCL's 0x00RRGGBB in a float32 or uint32,
+    or separate ``r``, ``g``, ``b`` fields, as (N,3) uint8) come along, filtered
+    like the points. Raises :class:`DecodeError` for a layout the data cannot hold.
     """
     xyz = _xyz_view(msg)
+    intensity = rgb = None
+    if attributes and xyz.shape[0]:
+        data, n_points = _point_bytes(msg)
+        intensity, rgb = _attribute_views(msg, data, n_points)
     n_implausible = 0
+    keep_index = None
     if not keep_nan:
         # Per-column tests and an index gather: about 3x faster than isfinite(xyz).all(1) and a
         # boolean mask on the strided (N,3) view of a padded cloud. NaN fails the test too.
@@ -216,13 +293,19 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False) -> CloudArrays:
         if not keep.all():
             rest = xyz[~keep]
             n_implausible = int(np.isfinite(rest).all(axis=1).sum())
-        xyz = xyz.take(np.flatnonzero(keep), axis=0)
+        keep_index = np.flatnonzero(keep)
+        xyz = xyz.take(keep_index, axis=0)
     with np.errstate(over="ignore"):  # with keep_nan, float64 beyond float32's range becomes inf
         points = np.asarray(xyz, dtype=np.float32)
+        if intensity is not None:
+            intensity = np.asarray(intensity if keep_index is None else intensity.take(keep_index), dtype=np.float32)
+    if rgb is not None and keep_index is not None:
+        rgb = rgb.take(keep_index, axis=0)
     size, expected = len(msg.data), int(msg.height) * int(msg.row_step)
     notes = () if size == expected or int(msg.height) * int(msg.width) == 0 else (
         f"PointCloud2 data holds {size} bytes, not height x row_step = {expected}",)
-    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible, notes)
+    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible, notes,
+                       intensity, rgb)
 
 
 @dataclass(frozen=True)

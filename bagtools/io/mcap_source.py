@@ -33,7 +33,7 @@ from pathlib import Path
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Message, MessageIndex, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 #: Largest decompressed chunk accepted (a damaged size field must not make us allocate terabytes).
@@ -80,6 +80,9 @@ class McapScan:
     cut_at_byte: int | None = None  # where a truncated file ends in the middle of a record
     damage: list[str] = field(default_factory=list)
     lost_messages: int = 0
+    profile: str | None = None  # the header's profile ('ros2', 'ros1', ...) and writing library
+    library: str | None = None
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)  # metadata records by name
     chunk_heads: dict[int, tuple[int, int, int, int]] = field(default_factory=dict)  # offset -> sizes and times  # messages known (from message indexes) to be in unreadable chunks
 
     @property
@@ -280,6 +283,10 @@ def scan_mcap(path: Path) -> McapScan:
                     _count(scan, record)
                 elif isinstance(record, (Schema, Channel)):
                     _register(scan, record)
+                elif isinstance(record, Header):
+                    scan.profile, scan.library = record.profile, record.library
+                elif isinstance(record, Metadata):
+                    scan.metadata[record.name] = dict(record.metadata)
                 elif isinstance(record, DataEnd):
                     run = None
                 elif isinstance(record, Footer):

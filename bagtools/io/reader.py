@@ -430,6 +430,15 @@ class BagReader:
         """Time from the first to the last message, int nanoseconds."""
         return max(0, self.end_ns - self.start_ns)
 
+    def storage_files(self) -> list[Path]:
+        """The files that hold the messages (a rosbag2 directory's .mcap/.db3 files, or the bag file itself)."""
+        directory = self.path.parent if self.path.name == "metadata.yaml" else self.path
+        return _storage_files(directory) if directory.is_dir() else [self.path]
+
+    def storage_sources(self) -> list[Any]:
+        """The readers of the storage files (for :func:`bagtools.io.storage.storage_details`)."""
+        return list(self._source.parts) if isinstance(self._source, _MergedSource) else [self._source]
+
     def require_topic(self, name: str, msgtypes: Iterable[str] | None = None) -> TopicInfo:
         """Return the topic's info, or raise :class:`TopicError` naming what exists."""
         info = self.topics.get(name)

@@ -42,7 +42,7 @@ from bagtools.ndt import NdtReference, match_scans
 from bagtools.ndt.correlative import CorrelativeReference, match_scans_grid
 from bagtools.ndt.grid import CELL_MODELS
 from bagtools.ndtodom.steps import FrontEndRun, ScanStep
-from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
+from bagtools.transforms import wrap_to_pi
 
 GUESSES = ("odom", "constant-velocity", "zero")
 
@@ -67,6 +67,8 @@ OUTLIER_COST = 0.3
 CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.08
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
 PRIOR_GATE2 = 14.0
+#: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
+LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
@@ -80,7 +82,9 @@ class FrontEndOptions:
 
     ``init``: which guess NDT starts from first ("auto": odometry when given,
     else constant velocity). ``search``: allow the grid search. ``reference``:
-    "keyframe" or "previous" (every scan is a keyframe).
+    "keyframe" or "previous" (every scan is a keyframe). ``wheeled``: the scans
+    ride on a wheeled robot, whose steps run along arcs (False for a handheld
+    or flying laser, which can move sideways).
     """
 
     init: str = "auto"
@@ -103,6 +107,7 @@ class FrontEndOptions:
     submap_keyframes: int = 5
     prior_weight: float = PRIOR_WEIGHT_DEFAULT
     voxel_m: float = 0.2
+    wheeled: bool = True
     max_iterations: int = 100
 
     def __post_init__(self) -> None:
@@ -177,6 +182,11 @@ class _Prior:
     cheaper of the two explanations, the wide one paying OUTLIER_COST (in
     normalized score) for its rarity: the scans must be that much better
     aligned to overrule the odometry.
+
+    With ``origin`` (the previous scan's pose, same frame), a wheeled robot's
+    motion model adds its cost: a step from ``origin`` runs along an arc, so
+    its sideways offset from the chord at half its turn is unlikely (see
+    LATERAL_SD_M). Odometry's steps follow an arc already and have no origin.
     """
 
     mean: np.ndarray
@@ -185,10 +195,18 @@ class _Prior:
     wide: _Prior | None = None
     outlier_cost: float = 0.0
     kind: str = "kinematic"
+    origin: np.ndarray | None = None
 
     def mahalanobis2(self, pose: np.ndarray) -> float:
-        d = se2_between(self.mean, pose)
-        return float(np.sum((d / self.sd) ** 2))
+        d = _between(self.mean, pose)
+        cost = float((d[0] / self.sd[0]) ** 2 + (d[1] / self.sd[1]) ** 2 + (d[2] / self.sd[2]) ** 2)
+        if self.origin is not None:
+            step = _between(self.origin, pose)
+            half = 0.5 * step[2]
+            sideways = step[1] * math.cos(half) - step[0] * math.sin(half)
+            sd = LATERAL_SD_M + LATERAL_SD_RATIO * math.hypot(step[0], step[1])
+            cost += (sideways / sd) ** 2
+        return cost
 
     def cost(self, pose: np.ndarray) -> float:
         """-2 log of the prior density relative to its peak (squared Mahalanobis for one Gaussian)."""
@@ -282,12 +300,12 @@ class LaserOdometry:
         if best.score < opts.min_score:
             self.counts[FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
-            best = _Match(se2_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
-        pose = se2_compose(kf.pose, best.pose)
+            best = _Match(_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
+        pose = _compose(kf.pose, best.pose)
         pose[2] = wrap_to_pi(pose[2])
         self._check(last, pose, dt, prior, best)
         if best.source != "fallback":
-            self._velocity = se2_between(last.pose, pose) / dt
+            self._velocity = _between(last.pose, pose) / dt
             self._scores.append(best.score)
         keyframe = self._is_new_keyframe(best)
         step = ScanStep(stamp_ns, pose, full, kf.index, best.pose, best.covariance, best.score, best.source, keyframe)
@@ -305,8 +323,8 @@ class LaserOdometry:
         cv[2] = float(np.clip(cv[2], -opts.max_turn_rate_radps * dt, opts.max_turn_rate_radps * dt))
         guesses: dict[str, np.ndarray] = {}
         if odom is not None and self._last_odom is not None and opts.init in ("auto", "odom"):
-            guesses["odom"] = se2_compose(last_pose, se2_between(self._last_odom, odom))
-        guesses["constant-velocity"] = se2_compose(last_pose, cv)
+            guesses["odom"] = _compose(last_pose, _between(self._last_odom, odom))
+        guesses["constant-velocity"] = _compose(last_pose, cv)
         guesses["zero"] = last_pose.copy()
         first = opts.init if opts.init in guesses else next(iter(guesses))
         return {first: guesses[first]} | {k: v for k, v in guesses.items() if k != first}
@@ -325,7 +343,7 @@ class LaserOdometry:
         """NDT from the first guess, then from every other guess outside the basins of the results so far."""
         matches: list[_Match] = []
         for guess in guesses.values():
-            initial = se2_between(kf.pose, guess)
+            initial = _between(kf.pose, guess)
             if any(_close(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
                 continue
             matches.append(self._ndt(points, kf, initial, "ndt", prior))
@@ -335,11 +353,12 @@ class LaserOdometry:
         """Where the scan should be before matching: the odometry's motion (its noise grows with the motion),
         else constant velocity (its uncertainty grows with the time step: the robot may have changed its speed)."""
         opts = self.options
-        motion = se2_between(last_pose, guesses["constant-velocity"])
+        motion = _between(last_pose, guesses["constant-velocity"])
         sd_xy = CV_NOISE_M + 0.5 * opts.max_accel_mps2 * dt * dt + CV_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
-        kinematic = _Prior(se2_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
-                           opts.prior_weight)
+        origin = _between(kf.pose, last_pose) if opts.wheeled else None
+        kinematic = _Prior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
+                           opts.prior_weight, origin=origin)
         if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
             return kinematic
         if "odom" not in guesses:
@@ -348,11 +367,12 @@ class LaserOdometry:
             sd_xy = CV_STEADY_M + CV_STEADY_RATIO * float(np.hypot(motion[0], motion[1]))
             sd_theta = CV_STEADY_RAD + CV_STEADY_RATIO * abs(float(motion[2]))
             return _Prior(kinematic.mean, np.minimum(np.array([sd_xy, sd_xy, sd_theta]), kinematic.sd),
-                          opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity")
-        motion = se2_between(last_pose, guesses["odom"])
+                          opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity",
+                          origin=origin)
+        motion = _between(last_pose, guesses["odom"])
         sd_xy = ODOM_NOISE_M + ODOM_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))
-        return _Prior(se2_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
+        return _Prior(_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
     def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
@@ -391,7 +411,7 @@ class LaserOdometry:
 
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
-        step = se2_between(last.pose, pose)
+        step = _between(last.pose, pose)
         if prior.kind == "odometry" and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
             self.counts[ODOM_REJECTED] += 1
         if np.hypot(step[0], step[1]) > 2.0 * self.options.max_speed_mps * dt + 0.1:
@@ -416,7 +436,7 @@ class LaserOdometry:
             if k == index:
                 continue
             older = self.run.steps[k]
-            rel = se2_between(pose, older.pose)
+            rel = _between(pose, older.pose)
             if np.hypot(rel[0], rel[1]) > SUBMAP_RADIUS_M:
                 break
             c, s = np.cos(rel[2]), np.sin(rel[2])
@@ -450,7 +470,7 @@ class LaserOdometry:
 
 
 def _close(a: np.ndarray, b: np.ndarray, tol_m: float, tol_rad: float) -> bool:
-    d = se2_between(a, b)
+    d = _between(a, b)
     return bool(np.hypot(d[0], d[1]) <= tol_m and abs(d[2]) <= tol_rad)
 
 
@@ -464,3 +484,18 @@ def _voxel_filter(points: np.ndarray, voxel_m: float) -> np.ndarray:
     sums = np.zeros((counts.size, 2))
     np.add.at(sums, voxel.reshape(-1), points)
     return sums / counts[:, None]
+
+
+# Single planar poses [x, y, theta] in the loop body: the same as bagtools.transforms' se2_between and se2_compose
+# (which the tests compare them with), without numpy's per-call overhead on 3-vectors (tens of calls per scan).
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a then b (b in a's frame), theta not wrapped."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """b in a's frame, theta wrapped to [-pi, pi)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, (b[2] - a[2] + math.pi) % (2 * math.pi) - math.pi])

@@ -26,7 +26,9 @@ import numpy as np
 
 from bagtools.dataset import ScanStream, require_topic
 from bagtools.errors import BagtoolsError
-from bagtools.io import LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, TfArrays, TfCollector, decode_odometry, open_bag
+from bagtools.io import (
+    LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry, open_bag,
+)
 from bagtools.ndt import MIN_SCAN_POINTS
 from bagtools.ndt.grid import CELL_MODELS
 from bagtools.ndtodom.frontend import GUESSES, VOXEL_PER_CELL, FrontEndOptions, LaserOdometry, cell_size_for
@@ -57,7 +59,8 @@ class NdtOdomOptions:
     ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
     overriding (or standing in for) tf. ``max_speed_mps`` and
     ``max_turn_rate_radps``: what the robot can do (bounds constant velocity
-    and the search).
+    and the search). ``wheeled``: False for a handheld or flying laser (its
+    steps need not run along arcs, see :class:`~bagtools.ndtodom.frontend.FrontEndOptions`).
     """
 
     topic: str = "/scan"
@@ -74,6 +77,7 @@ class NdtOdomOptions:
     scan_frame_offset: tuple[float, float, float] | None = None
     max_speed_mps: float = FrontEndOptions.max_speed_mps
     max_turn_rate_radps: float = FrontEndOptions.max_turn_rate_radps
+    wheeled: bool = True
     max_iterations: int = 100
 
     def __post_init__(self) -> None:
@@ -108,7 +112,8 @@ class NdtOdomOptions:
                                min_score=self.min_score,
                                keyframe_distance_m=self.keyframe_distance_m, keyframe_angle_rad=self.keyframe_angle_rad,
                                keyframe_score_ratio=self.keyframe_score_ratio, max_speed_mps=self.max_speed_mps,
-                               max_turn_rate_radps=self.max_turn_rate_radps, max_iterations=self.max_iterations)
+                               max_turn_rate_radps=self.max_turn_rate_radps, wheeled=self.wheeled,
+                               max_iterations=self.max_iterations)
 
 
 @dataclass
@@ -120,7 +125,9 @@ class NdtOdomResult:
     the odometry frame (None when absent); ``front_end``: every registered scan
     (points in the base frame, keyframes, matches and covariances: what slam
     builds its graph from); ``problem``: set when nothing could be matched (the
-    CLI then exits 2 and writes nothing).
+    CLI then exits 2 and writes nothing). ``scans``: the LaserScan of each step,
+    as decoded (kept only when asked for: results.mcap re-publishes them);
+    ``T_base_scan`` (4,4): the laser mount the points were moved by.
     """
 
     trajectory: Trajectory | None
@@ -129,6 +136,8 @@ class NdtOdomResult:
     front_end: FrontEndRun
     summary: dict = field(default_factory=dict)
     problem: str | None = None
+    scans: list[LaserScanArrays] = field(default_factory=list)
+    T_base_scan: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     @property
     def scan_points(self) -> list[np.ndarray]:
@@ -144,9 +153,12 @@ class NdtOdomResult:
 class NdtOdomPipeline:
     """Laser odometry of one bag (see the module docstring)."""
 
-    def __init__(self, bag_path: str | Path, options: NdtOdomOptions) -> None:
+    def __init__(self, bag_path: str | Path, options: NdtOdomOptions, keep_scans: bool = False) -> None:
+        """``keep_scans``: keep each step's LaserScan (``NdtOdomResult.scans``, for results.mcap)."""
         self.bag_path = Path(bag_path)
         self.options = options
+        self.keep_scans = keep_scans
+        self.scans: list[LaserScanArrays] = []
         self.skipped: dict[str, int] = {}
         self.warnings: list[str] = []
         self.buffer: TfBuffer | None = None
@@ -186,7 +198,8 @@ class NdtOdomPipeline:
             summary.update(evaluation)
             summary["warnings"] = self.warnings
         front.run.warnings = list(self.warnings)
-        return NdtOdomResult(trajectory, odom_traj, truth, front.run, summary)
+        return NdtOdomResult(trajectory, odom_traj, truth, front.run, summary, scans=self.scans,
+                             T_base_scan=self.T_base_scan)
 
     # -- steps -------------------------------------------------------------------
 
@@ -244,6 +257,8 @@ class NdtOdomPipeline:
                 self.scan_frame = item.scan.frame_id.lstrip("/")
             stamps.append(item.scan.stamp_ns)
             points.append(item.scan.points_xy())
+            if self.keep_scans:
+                self.scans.append(item.scan)
         self.skipped = dict(stream.skipped)
         self.warnings.extend(stream.warnings())
         return np.asarray(stamps, dtype=np.int64), points
@@ -397,7 +412,7 @@ def _tf_arrays(parent: str, child: str, stamps_ns: np.ndarray, T: np.ndarray) ->
                     np.asarray(stamps_ns, dtype=np.int64), T[:, :3, 3].copy(), quat2xyzw(tform2quat(T)))
 
 
-def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None) -> NdtOdomResult:
+def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None, keep_scans: bool = False) -> NdtOdomResult:
     """The laser-odometry front end of a bag, as ``ndt-odom`` computes it: for ``slam`` and scripts.
 
     ``result.front_end`` is the :class:`~bagtools.ndtodom.steps.FrontEndRun`
@@ -405,6 +420,7 @@ def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None) -
     keyframes with their matches and covariances); ``result.odometry`` and
     ``result.ground_truth`` the bag's wheel odometry and reference at the scan
     stamps (None when absent); ``result.problem`` says why nothing could be
-    registered. Pass ``NdtOdomOptions(use_odometry=False)`` to ignore the wheels.
+    registered. Pass ``NdtOdomOptions(use_odometry=False)`` to ignore the wheels, and ``keep_scans=True``
+    for ``result.scans`` (the LaserScans of the steps, as decoded: what results.mcap re-publishes).
     """
-    return NdtOdomPipeline(bag_path, options or NdtOdomOptions()).run()
+    return NdtOdomPipeline(bag_path, options or NdtOdomOptions(), keep_scans=keep_scans).run()

@@ -54,7 +54,7 @@ def tum_text(trajectory: Trajectory, frame: str | None = None, body: str | None 
     lines = [f"# frame: {frame} body: {body}"] if frame and body else []
     for stamp_ns, xyz, q in zip(trajectory.stamps_ns, trajectory.positions, quat_xyzw):
         seconds = f"{int(stamp_ns) // 1_000_000_000}.{int(stamp_ns) % 1_000_000_000:09d}"
-        lines.append(seconds + " " + " ".join(f"{v:.9f}" for v in (*xyz, *q)))
+        lines.append(seconds + " " + " ".join(f"{round(v, 9) + 0.0:.9f}" for v in (*xyz, *q)))  # never "-0.000000000"
     return "\n".join(lines) + ("\n" if lines else "")
 
 

@@ -42,7 +42,9 @@ class Odometry:
     """Odometry of base_footprint in the odom frame (origin = start pose).
 
     ``poses`` (N+1, 3) [x, y, yaw] at the step boundaries; ``v_mps``/``w_radps`` (N,) the measured
-    twist over each step (in base_footprint); the calibration factors actually drawn.
+    twist over each step (in base_footprint); ``wheel_left_rad``/``wheel_right_rad`` (N+1,) the
+    encoder angles the odometry integrated (wheel_left_joint/wheel_right_joint positions, 0 at
+    the start); the calibration factors actually drawn.
     """
 
     poses: np.ndarray
@@ -51,6 +53,8 @@ class Odometry:
     radius_scale_left: float
     radius_scale_right: float
     separation_scale: float
+    wheel_left_rad: np.ndarray
+    wheel_right_rad: np.ndarray
 
 
 def wheel_odometry(motion: Motion, level: str, rng: np.random.Generator) -> Odometry:
@@ -84,5 +88,8 @@ def wheel_odometry(motion: Motion, level: str, rng: np.random.Generator) -> Odom
         ds_r, ds_l = dphi_r * WHEEL_RADIUS_M, dphi_l * WHEEL_RADIUS_M
         ds, dyaw = 0.5 * (ds_r + ds_l), (ds_r - ds_l) / WHEEL_SEPARATION_M
     poses = integrate_increments((0.0, 0.0, 0.0), ds, dyaw)
-    return Odometry(poses, ds / motion.dt_s, dyaw / motion.dt_s, float(scale_l), float(scale_r), float(scale_b))
+    wheel_left = np.concatenate(([0.0], np.cumsum(dphi_l)))
+    wheel_right = np.concatenate(([0.0], np.cumsum(dphi_r)))
+    return Odometry(poses, ds / motion.dt_s, dyaw / motion.dt_s, float(scale_l), float(scale_r), float(scale_b),
+                    wheel_left, wheel_right)
 

@@ -1,11 +1,16 @@
-"""TurtleBot3 Waffle constants and its static transforms (from the Waffle URDF).
+"""TurtleBot3 Waffle constants, its joints (from ROBOTIS' ``turtlebot3_waffle.urdf``) and its URDF text.
 
-Lengths in metres, angles in radians, speeds in m/s and rad/s.
+Lengths in metres, angles in radians, speeds in m/s and rad/s. The joint origins are the
+numbers of ROBOTIS' URDF (``turtlebot3_description/urdf/turtlebot3_waffle.urdf``), which
+robot_state_publisher turns into ``/tf_static`` (fixed joints) and ``/tf`` (the two
+continuous wheel joints, from ``/joint_states``); rotations are URDF ``rpy`` as written
+there (e.g. -1.57, not -pi/2), so the frames are the ones a real Waffle publishes.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -17,50 +22,107 @@ MAX_ANGULAR_RADPS = 1.82
 # nav2_bringup's nav2_params.yaml uses robot_radius 0.22 for the TurtleBot3 costmaps.
 ROBOT_RADIUS_M = 0.22
 ENCODER_TICKS_PER_REV = 4096  # Dynamixel XM430 position resolution
+ROBOT_NAME = "turtlebot3_waffle"
+WHEEL_JOINTS = ("wheel_left_joint", "wheel_right_joint")
 
 
 @dataclass(frozen=True)
-class StaticTransform:
-    """A fixed transform T_parent_child: translation in metres, rotation as quaternion x, y, z, w (ROS order)."""
+class Joint:
+    """A URDF joint: ``parent`` -> ``child`` at ``xyz_m``/``rpy_rad`` (URDF origin), about ``axis`` if it moves."""
 
+    name: str
+    kind: str  # "fixed" or "continuous"
     parent: str
     child: str
     xyz_m: tuple[float, float, float]
-    quat_xyzw: tuple[float, float, float, float]
+    rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
-    def matrix(self) -> np.ndarray:
-        """The 4x4 homogeneous T_parent_child."""
+    @property
+    def quat_xyzw(self) -> tuple[float, float, float, float]:
+        """The origin's rotation as a quaternion x, y, z, w (URDF rpy: fixed axes, roll about x first)."""
+        x, y, z, w = Rotation.from_euler("xyz", self.rpy_rad).as_quat()
+        return (float(x), float(y), float(z), float(w))
+
+    def matrix(self, angle_rad: float = 0.0) -> np.ndarray:
+        """The 4x4 T_parent_child at joint position ``angle_rad`` (0 for fixed joints)."""
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_quat(self.quat_xyzw).as_matrix()
+        R = Rotation.from_euler("xyz", self.rpy_rad)
+        if self.kind != "fixed" and angle_rad != 0.0:
+            R = R * Rotation.from_rotvec(np.asarray(self.axis) * angle_rad)
+        T[:3, :3] = R.as_matrix()
         T[:3, 3] = self.xyz_m
         return T
 
 
-def _quat_xyzw_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    x, y, z, w = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat()
-    return (float(x), float(y), float(z), float(w))
-
-
-_IDENTITY = (0.0, 0.0, 0.0, 1.0)
-STATIC_TRANSFORMS: tuple[StaticTransform, ...] = (
-    StaticTransform("base_footprint", "base_link", (0.0, 0.0, 0.010), _IDENTITY),
-    StaticTransform("base_link", "base_scan", (-0.064, 0.0, 0.121), _IDENTITY),
-    StaticTransform("base_link", "camera_link", (0.064, -0.065, 0.094), _IDENTITY),
-    StaticTransform("camera_link", "camera_rgb_frame", (0.005, 0.018, 0.013), _IDENTITY),
-    StaticTransform(
-        "camera_rgb_frame", "camera_rgb_optical_frame", (0.0, 0.0, 0.0), _quat_xyzw_from_rpy(-np.pi / 2, 0.0, -np.pi / 2)
-    ),
+_OPTICAL_RPY = (-1.57, 0.0, -1.57)  # as in the URDF: z forward, x right, y down
+JOINTS: tuple[Joint, ...] = (
+    Joint("base_joint", "fixed", "base_footprint", "base_link", (0.0, 0.0, 0.010)),
+    Joint("wheel_left_joint", "continuous", "base_link", "wheel_left_link", (0.0, 0.144, 0.023), (-1.57, 0.0, 0.0)),
+    Joint("wheel_right_joint", "continuous", "base_link", "wheel_right_link", (0.0, -0.144, 0.023), (-1.57, 0.0, 0.0)),
+    Joint("caster_back_right_joint", "fixed", "base_link", "caster_back_right_link", (-0.177, -0.064, -0.004),
+          (-1.57, 0.0, 0.0)),
+    Joint("caster_back_left_joint", "fixed", "base_link", "caster_back_left_link", (-0.177, 0.064, -0.004),
+          (-1.57, 0.0, 0.0)),
+    Joint("imu_joint", "fixed", "base_link", "imu_link", (0.0, 0.0, 0.068)),
+    # 0.122 as in the URDF that robot_state_publisher publishes (the Gazebo SDF says 0.121).
+    Joint("scan_joint", "fixed", "base_link", "base_scan", (-0.064, 0.0, 0.122)),
+    Joint("camera_joint", "fixed", "base_link", "camera_link", (0.064, -0.065, 0.094)),
+    Joint("camera_rgb_joint", "fixed", "camera_link", "camera_rgb_frame", (0.005, 0.018, 0.013)),
+    Joint("camera_rgb_optical_joint", "fixed", "camera_rgb_frame", "camera_rgb_optical_frame", (0.0, 0.0, 0.0),
+          _OPTICAL_RPY),
+    Joint("camera_depth_joint", "fixed", "camera_link", "camera_depth_frame", (0.005, 0.028, 0.013)),
+    Joint("camera_depth_optical_joint", "fixed", "camera_depth_frame", "camera_depth_optical_frame", (0.0, 0.0, 0.0),
+          _OPTICAL_RPY),
 )
+STATIC_TRANSFORMS: tuple[Joint, ...] = tuple(j for j in JOINTS if j.kind == "fixed")
+WHEEL_JOINT_MODELS: tuple[Joint, ...] = tuple(j for j in JOINTS if j.name in WHEEL_JOINTS)
 
 
-def T_base_footprint_frame(frame: str) -> np.ndarray:
-    """The 4x4 T_base_footprint_<frame> by chaining the static transforms down from base_footprint."""
-    by_child = {st.child: st for st in STATIC_TRANSFORMS}
+def T_base_footprint_frame(frame: str, wheel_angles_rad: dict[str, float] | None = None) -> np.ndarray:
+    """The 4x4 T_base_footprint_<frame>, chaining joints down from base_footprint (wheels at the given angles)."""
+    by_child = {j.child: j for j in JOINTS}
+    angles = wheel_angles_rad or {}
     T = np.eye(4)
     while frame != "base_footprint":
         if frame not in by_child:
             raise ValueError(f"unknown frame {frame!r}")
-        st = by_child[frame]
-        T = st.matrix() @ T
-        frame = st.parent
+        joint = by_child[frame]
+        T = joint.matrix(angles.get(joint.name, 0.0)) @ T
+        frame = joint.parent
     return T
+
+
+def wheel_quats_xyzw(joint: Joint, angles_rad: np.ndarray) -> np.ndarray:
+    """Rotations (N, 4) x, y, z, w of T_base_link_wheel at wheel angles (N,) rad, as robot_state_publisher computes them."""
+    R = Rotation.from_euler("xyz", joint.rpy_rad) * Rotation.from_rotvec(np.outer(angles_rad, joint.axis))
+    return R.as_quat()
+
+
+def urdf_text() -> str:
+    """A URDF of the Waffle's links and joints (no meshes), consistent with the transforms the simulator publishes.
+
+    Wheels carry their cylinder collision (radius ``WHEEL_RADIUS_M``); this is what ``/robot_description`` holds.
+    """
+    def fmt(values: tuple[float, ...]) -> str:
+        return " ".join(f"{v:g}" for v in values)
+
+    links = ["base_footprint"] + [j.child for j in JOINTS]
+    lines = ['<?xml version="1.0" ?>', f"<robot name={quoteattr(ROBOT_NAME)}>"]
+    for link in links:
+        if link in ("wheel_left_link", "wheel_right_link"):
+            lines += [f"  <link name={quoteattr(link)}>", "    <collision>", '      <origin xyz="0 0 0" rpy="0 0 0"/>',
+                      f'      <geometry><cylinder length="0.018" radius="{WHEEL_RADIUS_M:g}"/></geometry>',
+                      "    </collision>", "  </link>"]
+        else:
+            lines.append(f"  <link name={quoteattr(link)}/>")
+    for j in JOINTS:
+        lines += [f"  <joint name={quoteattr(j.name)} type={quoteattr(j.kind)}>",
+                  f"    <parent link={quoteattr(j.parent)}/>",
+                  f"    <child link={quoteattr(j.child)}/>",
+                  f'    <origin xyz="{fmt(j.xyz_m)}" rpy="{fmt(j.rpy_rad)}"/>']
+        if j.kind != "fixed":
+            lines.append(f'    <axis xyz="{fmt(j.axis)}"/>')
+        lines.append("  </joint>")
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"

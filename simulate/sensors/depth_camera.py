@@ -7,6 +7,9 @@ the ``pointCloudCutoff`` set in ``turtlebot3_waffle.gazebo.xacro`` and the
 depth plugin's default ``pointCloudCutoffMax``. Image size is the caller's
 choice (the model renders 1920x1080; 160x120 keeps bags small).
 
+The cloud is published in ``camera_depth_optical_frame`` (the R200's depth optical
+frame in ROBOTIS' URDF) with its intrinsics on ``/camera/depth/camera_info`` (``K``, ``P``).
+
 Geometry is Gazebo's: a pinhole with square pixels, focal length
 ``f = width / (2 tan(hfov / 2))`` pixels and principal point at the image
 centre ``((width - 1) / 2, (height - 1) / 2)``. Each pixel's point is
@@ -72,6 +75,16 @@ class DepthCamera:
         return self.width / (2.0 * np.tan(self.hfov_rad / 2.0))
 
     @property
+    def K(self) -> np.ndarray:
+        """The 3x3 intrinsic matrix in pixels (CameraInfo ``k``): [[f, 0, cx], [0, f, cy], [0, 0, 1]]."""
+        return np.array([[self.focal_px, 0.0, self.cx], [0.0, self.focal_px, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def P(self) -> np.ndarray:
+        """The 3x4 projection matrix in pixels (CameraInfo ``p``): K with a zero fourth column (no stereo baseline)."""
+        return np.hstack([self.K, np.zeros((3, 1))])
+
+    @property
     def cx(self) -> float:
         """Principal point column in pixels."""
         return 0.5 * (self.width - 1)
@@ -88,7 +101,7 @@ class DepthCamera:
 
         Args:
             world: the world to look at.
-            T_map_optical: (4, 4) pose of camera_rgb_optical_frame in the map.
+            T_map_optical: (4, 4) pose of the optical frame (camera_depth_optical_frame) in the map.
             rng: noise source; ``None`` gives exact depths. Each call draws
                 exactly H*W normals when noise is on.
         """
@@ -115,8 +128,8 @@ class DepthCamera:
 
         Args:
             world: the world to look at.
-            T_map_optical: (4, 4) pose of camera_rgb_optical_frame in the map
-                (maps optical-frame points into the map).
+            T_map_optical: (4, 4) pose of the optical frame (camera_depth_optical_frame)
+                in the map (maps optical-frame points into the map).
             rng: noise source; ``None`` gives exact points.
         """
         z = self.depth(world, T_map_optical, rng)

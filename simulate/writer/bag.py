@@ -1,55 +1,58 @@
-"""A rosbag2 writer for the simulator: MCAP storage with zstd chunks, via rosbags' Writer.
+"""A rosbag2 writer for the simulator: one zstd-chunked MCAP file with CRCs, and metadata.yaml per distro.
 
-``ros_distro="jazzy"`` writes rosbag2 metadata version 9; ``"humble"`` writes version 5, the
-latest that Humble's rosbag2 reads (rosbags writes 8, and the metadata.yaml is then rewritten
-as version 5, keeping the QoS strings identical to those stored in the MCAP channels).
+Every ``--ros-distro`` gives a bag its own rosbag2 reads (see :mod:`simulate.writer.metadata`):
+
+- ``humble`` (the default): metadata version 5, which Humble *and* Jazzy read (Jazzy reads
+  every version from 4 on). Channel QoS strings use Humble's numbered policies.
+- ``jazzy``: the metadata exactly as Jazzy writes it, version 9 (QoS as a YAML list of named
+  policies, ``type_description_hash``, ``ros_distro: jazzy``), which Humble cannot open.
+
+The MCAP file has the layout of rosbag2's MCAP storage plugin: profile ``ros2``, one ``ros2msg``
+schema per type (the concatenated message definitions), one ``cdr`` channel per topic whose
+metadata holds ``offered_qos_profiles`` and ``topic_type_hash`` (the RIHS01 hash of REP 2011,
+as Jazzy's plugin stores it; Humble's plugin ignores the key), message indexes, and a
+``rosbag2`` metadata record with the bag's ``serialized_metadata`` (plus ``ROS_DISTRO``, which
+newer readers take from Humble-era files). Chunks are zstd-compressed and every chunk and the
+summary carry a CRC-32, as libmcap writes them by default and rosbag2 does when its storage
+config says ``compression: Zstd`` and ``noChunkCRC: false`` (out of the box rosbag2 writes
+uncompressed chunks without CRCs; readers accept both). Message log time is the receive time and publish time equals it.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from types import TracebackType
+from typing import BinaryIO
 
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
-from rosbags.rosbag2 import Writer
-from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
-from rosbags.rosbag2.metadata import dump_qos_v8
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from bagtools.errors import BagtoolsError
+from simulate.writer.mcap_file import McapFileWriter
+from simulate.writer.metadata import BagInfo, OfferedQos, TopicInfo, metadata_yaml, qos_string, serialized_metadata
 
 ROS_DISTROS = {"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}
-_INFINITE = QosTime(sec=9223372036, nsec=854775807)  # what rosbag2 records for "no deadline/lifespan"
+DEFAULT_ROS_DISTRO = "humble"
+MCAP_LIBRARY = "bagtools simulate"
 
+_SENSOR = OfferedQos(reliable=False, transient_local=False)  # rclcpp's SensorDataQoS
+_RELIABLE = OfferedQos(reliable=True, transient_local=False)
+_LATCHED = OfferedQos(reliable=True, transient_local=True)  # tf2 static broadcaster, robot_state_publisher
 
-def qos(reliable: bool, transient_local: bool, depth: int) -> Qos:
-    """An offered QoS profile: keep-last ``depth``, reliable or best effort, transient-local or volatile."""
-    return Qos(
-        history=QosHistory.KEEP_LAST,
-        depth=depth,
-        reliability=QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
-        durability=QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
-        deadline=_INFINITE,
-        lifespan=_INFINITE,
-        liveliness=QosLiveliness.AUTOMATIC,
-        liveliness_lease_duration=_INFINITE,
-        avoid_ros_namespace_conventions=False,
-    )
-
-
-# topic -> (message type, offered QoS): tf2's static broadcaster latches (transient local,
-# depth 1); sensors use the sensor-data profile (best effort).
-TOPICS: dict[str, tuple[str, Qos]] = {
-    "/simulation/world": ("std_msgs/msg/String", qos(True, True, 1)),
-    "/tf_static": ("tf2_msgs/msg/TFMessage", qos(True, True, 1)),
-    "/tf": ("tf2_msgs/msg/TFMessage", qos(True, False, 100)),
-    "/odom": ("nav_msgs/msg/Odometry", qos(True, False, 10)),
-    "/ground_truth": ("nav_msgs/msg/Odometry", qos(True, False, 10)),
-    "/scan": ("sensor_msgs/msg/LaserScan", qos(False, False, 5)),
-    "/camera/depth/points": ("sensor_msgs/msg/PointCloud2", qos(False, False, 5)),
-    "/clicked_point": ("geometry_msgs/msg/PointStamped", qos(True, False, 10)),
+# topic -> (message type, offered QoS).
+TOPICS: dict[str, tuple[str, OfferedQos]] = {
+    "/simulation/world": ("std_msgs/msg/String", _LATCHED),
+    "/robot_description": ("std_msgs/msg/String", _LATCHED),
+    "/tf_static": ("tf2_msgs/msg/TFMessage", _LATCHED),
+    "/tf": ("tf2_msgs/msg/TFMessage", _RELIABLE),
+    "/odom": ("nav_msgs/msg/Odometry", _RELIABLE),
+    "/joint_states": ("sensor_msgs/msg/JointState", _RELIABLE),
+    "/imu": ("sensor_msgs/msg/Imu", _SENSOR),
+    "/ground_truth": ("nav_msgs/msg/Odometry", _RELIABLE),
+    "/scan": ("sensor_msgs/msg/LaserScan", _SENSOR),
+    "/camera/depth/camera_info": ("sensor_msgs/msg/CameraInfo", _SENSOR),
+    "/camera/depth/points": ("sensor_msgs/msg/PointCloud2", _SENSOR),
+    "/clicked_point": ("geometry_msgs/msg/PointStamped", _RELIABLE),
 }
 
 
@@ -75,7 +78,7 @@ class SimBagWriter:
     """Write serialized messages on the simulator's topics into a new rosbag2 directory ``path``.
 
     Use as a context manager; ``write(topic, log_time_ns, data)`` must be called in log-time
-    order. On error the storage is aborted (the caller removes the directory).
+    order. On error the file is closed unfinished (the caller removes the directory).
     """
 
     def __init__(self, path: str | Path, ros_distro: str, topics: list[str]) -> None:
@@ -86,73 +89,65 @@ class SimBagWriter:
         if unknown:
             raise ValueError(f"unknown simulator topics {unknown}")
         self.topics = list(topics)
-        self._writer = Writer(self.path, version=8 if ros_distro == "humble" else 9, storage_plugin=StoragePlugin.MCAP)
-        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        self._connections: dict = {}
+        self.file_name = f"{self.path.name}.mcap"
         self.counts: dict[str, int] = {t: 0 for t in topics}
+        self.type_hashes = {t: self.typestore.hash_rihs01(TOPICS[t][0]) for t in topics}
+        self._stream: BinaryIO | None = None
+        self._mcap: McapFileWriter | None = None
+        self._channels: dict[str, int] = {}
+        self._first_log_ns: int | None = None
         self._last_log_ns = -1
 
     def __enter__(self) -> SimBagWriter:
-        self._writer.open()
+        self.path.mkdir(mode=0o755, parents=True)
+        self._stream = (self.path / self.file_name).open("xb")
+        self._mcap = McapFileWriter(self._stream, profile="ros2", library=MCAP_LIBRARY)
+        schemas: dict[str, int] = {}
         for topic in self.topics:
-            msgtype, profile = TOPICS[topic]
-            self._connections[topic] = self._writer.add_connection(
-                topic, msgtype, typestore=self.typestore, offered_qos_profiles=[profile]
-            )
+            msgtype, offered = TOPICS[topic]
+            if msgtype not in schemas:
+                msgdef, _ = self.typestore.generate_msgdef(msgtype, ros_version=2)
+                schemas[msgtype] = self._mcap.register_schema(msgtype, "ros2msg", msgdef.encode("utf-8"))
+            self._channels[topic] = self._mcap.register_channel(
+                topic, "cdr", schemas[msgtype],
+                {"offered_qos_profiles": qos_string([offered], self.ros_distro), "topic_type_hash": self.type_hashes[topic]})
         return self
 
     def write(self, topic: str, log_time_ns: int, data: bytes) -> None:
-        """Append one serialized message with bag (log) time ``log_time_ns``."""
+        """Append one serialized message with bag (receive) time ``log_time_ns``."""
         if log_time_ns < self._last_log_ns:
             raise ValueError("messages must be written in log-time order")
+        if self._mcap is None:
+            raise ValueError("the bag is not open")
+        if self._first_log_ns is None:
+            self._first_log_ns = log_time_ns
         self._last_log_ns = log_time_ns
-        self._writer.write(self._connections[topic], int(log_time_ns), data)
+        self._mcap.add_message(self._channels[topic], log_time_ns, data)
         self.counts[topic] += 1
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
-        self._writer.__exit__(exc_type, exc, tb)
-        if exc_type is None and self.ros_distro == "humble":
-            self._rewrite_metadata_v5()
+    def bag_info(self) -> BagInfo:
+        """What metadata.yaml says of the messages written so far."""
+        start = self._first_log_ns if self._first_log_ns is not None else 0
+        topics = [TopicInfo(t, TOPICS[t][0], TOPICS[t][1], self.type_hashes[t], self.counts[t]) for t in self.topics]
+        return BagInfo(self.ros_distro, self.file_name, start, max(0, self._last_log_ns - start), topics)
 
-    def _rewrite_metadata_v5(self) -> None:
-        """Rewrite metadata.yaml in the version-5 layout Humble reads (same counts and times)."""
-        w = self._writer
-        mcap_name = f"{self.path.name}.mcap"
-        duration = max(0, w.max_timestamp - w.min_timestamp)
-        total = sum(w.counts.values())
-        lines = [
-            "rosbag2_bagfile_information:",
-            "  version: 5",
-            "  storage_identifier: mcap",
-            "  duration:",
-            f"    nanoseconds: {duration}",
-            "  starting_time:",
-            f"    nanoseconds_since_epoch: {w.min_timestamp}",
-            f"  message_count: {total}",
-            "  topics_with_message_count:",
-        ]
-        for conn in w.connections:
-            lines += [
-                "    - topic_metadata:",
-                f"        name: {conn.topic}",
-                f"        type: {conn.msgtype}",
-                "        serialization_format: cdr",
-                f"        offered_qos_profiles: {json.dumps(dump_qos_v8(conn.ext.offered_qos_profiles))}",
-                f"      message_count: {w.counts[conn.id]}",
-            ]
-        lines += [
-            '  compression_format: ""',
-            '  compression_mode: ""',
-            "  relative_file_paths:",
-            f"    - {mcap_name}",
-            "  files:",
-            f"    - path: {mcap_name}",
-            "      starting_time:",
-            f"        nanoseconds_since_epoch: {w.min_timestamp}",
-            "      duration:",
-            f"        nanoseconds: {duration}",
-            f"      message_count: {total}",
-        ]
-        tmp = self.path / "metadata.yaml.tmp"
-        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        tmp.replace(self.path / "metadata.yaml")
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        stream, mcap = self._stream, self._mcap
+        self._stream = self._mcap = None
+        if stream is None or mcap is None:
+            return
+        try:
+            if exc_type is None:
+                info = self.bag_info()
+                record = {"serialized_metadata": serialized_metadata(info)}
+                if self.ros_distro == "humble":
+                    record["ROS_DISTRO"] = "humble"
+                mcap.add_metadata("rosbag2", record)
+                mcap.finish()
+        finally:
+            stream.close()
+        if exc_type is None:
+            tmp = self.path / "metadata.yaml.tmp"
+            tmp.write_text(metadata_yaml(self.bag_info()), encoding="utf-8")
+            tmp.replace(self.path / "metadata.yaml")
+

@@ -18,10 +18,11 @@ from bagtools.batch.bags import BATCH_MANIFEST
 from bagtools.batch.jobs import JOBS
 from bagtools.batch.task import MARKER
 from bagtools.cli import main
+from bagtools.gridmap import GRID_MAP_FILES
 from tests.batch.conftest import Fleet, tree_state
 
 REPO = Path(__file__).resolve().parents[2]
-GRID_FILES = sorted(["map.pgm", "map.yaml", "map.png", "summary.json", MARKER])
+GRID_FILES = sorted([*GRID_MAP_FILES, MARKER])
 
 
 def _batch(argv: list[str], capsys) -> tuple[int, str, str]:
@@ -43,7 +44,7 @@ def test_help_has_an_example(capsys) -> None:
 
 
 @pytest.mark.parametrize("args, problem", [
-    (["tf", "{bag}"], "'tf' is not a command batch can run (choose from grid, info, map-cloud, ndt-odom)"),
+    (["tf", "{bag}"], "'tf' is not a command batch can run (choose from grid, info, map-cloud, ndt-odom, slam)"),
     (["grid", "{bag}", "--", "--resolution", "abc"], "'abc' is not a valid float (see 'bagtools grid --help')"),
     (["grid", "{bag}", "--", "--resolution", "0"], "--resolution must be between 0.1 and 1000"),
     (["ndt-odom", "{bag}", "--", "--init", "guess"], "invalid value for '--init'"),

@@ -66,3 +66,41 @@ def test_info_truncated_mcap_reports_recovery(tmp_path: Path, real_dir: Path) ->
 def test_help_has_an_example() -> None:
     result = run("info", "--help")
     assert result.returncode == 0 and "Example:" in result.stdout and "bagtools info" in result.stdout
+
+
+def test_info_storage_fields_as_ros2_bag_info(synthetic_bag: Path) -> None:
+    data = json.loads(run("info", "--json", str(synthetic_bag)).stdout)
+    storage = synthetic_bag / "synthetic.mcap"
+    assert data["storage_id"] == "mcap" and data["bag_size_bytes"] == storage.stat().st_size
+    assert data["files"] == [str(storage)] and data["serialization_format"] == "cdr"
+    assert data["ros_distro"] == "rosbags" and data["ros_version"] == 2 and data["metadata_version"] == 9
+    topics = {t["name"]: t for t in data["topics"]}
+    assert topics["/scan"]["serialization_format"] == "cdr" and isinstance(topics["/scan"]["offered_qos_profiles"], list)
+    text = run("info", str(synthetic_bag)).stdout
+    assert "storage id: mcap" in text and "ROS distro: rosbags" in text and "serialization format: cdr" in text
+    assert f"({storage.stat().st_size} bytes)" in text
+
+
+def test_info_qos_from_mcap_channels_and_results_distro(real_dir: Path, tmp_path: Path) -> None:
+    data = json.loads(run("info", "--json", str(real_dir / "nav2_turtlebot.mcap")).stdout)
+    assert data["storage_id"] == "mcap" and data["ros_distro"] is None and data["metadata_version"] is None
+    topics = {t["name"]: t for t in data["topics"]}
+    static, = topics["/tf_static"]["offered_qos_profiles"]
+    assert static["durability"] == "transient_local" and static["reliability"] == "reliable" and static["depth"] == 1
+    assert static["deadline"] == "infinite"
+    assert [p["depth"] for p in topics["/tf"]["offered_qos_profiles"]] == [10, 100, 100]
+    import numpy as np
+    from bagtools.results import ResultsBag
+
+    with ResultsBag(tmp_path / "results.mcap") as bag:
+        bag.tf_static([("base", "laser", np.eye(4))])
+    text = run("info", str(tmp_path / "results.mcap")).stdout
+    assert "ROS distro: humble" in text and "reliable transient_local keep_last(1)" in text
+
+
+def test_info_ros1_and_sqlite3_storage(real_dir: Path) -> None:
+    ros1 = json.loads(run("info", "--json", str(real_dir / "tf_example.bag")).stdout)
+    assert ros1["storage_id"] == "ros1" and ros1["serialization_format"] == "ros1" and ros1["ros_version"] == 1
+    assert all("latching" in t for t in ros1["topics"])
+    db3 = json.loads(run("info", "--json", str(real_dir / "tf_example")).stdout)
+    assert db3["storage_id"] == "sqlite3" and db3["bag_size_bytes"] == (real_dir / "tf_example" / "tf_example.db3").stat().st_size

@@ -25,7 +25,8 @@ def test_outputs_open_in_open3d(tmp_path: Path) -> None:
     out = tmp_path / "map"
     result = run(str(FIXTURE), "--out", str(out), "--voxel", "0.02")
     assert result.returncode == 0, result.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "results.mcap",
+                                                     "summary.json"]
     summary = json.loads((out / "summary.json").read_text())
     pcd = o3d.io.read_point_cloud(str(out / "cloud_map.pcd"))
     ply = o3d.io.read_point_cloud(str(out / "cloud_map.ply"))

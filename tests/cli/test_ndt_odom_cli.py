@@ -30,7 +30,8 @@ def test_simulated_bag_writes_everything_and_refuses_to_overwrite(tmp_path: Path
     assert "101 scans: 100 pairs matched" in done.stdout and "NDT: APE rmse" in done.stdout
     assert "odometry: APE rmse" in done.stdout
     names = sorted(p.name for p in out_dir.iterdir())
-    assert names == ["ground_truth.tum", "odometry.tum", "scan_map.png", "summary.json", "trajectory.png", "trajectory.tum"]
+    assert names == ["ground_truth.tum", "odometry.tum", "results.mcap", "scan_map.png", "summary.json", "trajectory.png",
+                     "trajectory.tum"]
     summary = json.loads((out_dir / "summary.json").read_text())
     assert summary["errors_ndt"]["ape_translation_m"]["rmse"] < summary["errors_odometry"]["ape_translation_m"]["rmse"]
     again = _run("ndt-odom", str(FIXTURES / "sim_lap_cloud_20s"), "--out", str(out_dir))

@@ -95,3 +95,30 @@ def test_csail_without_odometry_does_not_diverge(csail: Path) -> None:
     assert s["fallbacks"] <= 4  # at most 1% of 405 pairs
     assert np.median(trans) < 0.03 and rot.mean() < 1.5
     assert np.count_nonzero(trans > 0.2) <= 20
+
+
+def test_fast_planar_helpers_equal_the_transforms_module() -> None:
+    from bagtools.ndtodom.frontend import _between, _compose
+    from bagtools.transforms import se2_between as between
+    from bagtools.transforms import se2_compose as compose
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        a, b = rng.uniform(-4, 4, 3), rng.uniform(-4, 4, 3)
+        np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
+        d1, d2 = _between(a, b), between(a, b)
+        np.testing.assert_allclose(d1[:2], d2[:2], atol=1e-12)
+        assert abs((d1[2] - d2[2] + np.pi) % (2 * np.pi) - np.pi) < 1e-12
+
+
+def test_a_wheeled_robot_does_not_step_sideways() -> None:
+    """The kinematic prior's arc term: a step along the arc costs nothing sideways, a sideways jump costs much."""
+    from bagtools.ndtodom.frontend import _Prior
+
+    prior = _Prior(np.array([1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0]), origin=np.zeros(3))
+    turn = 0.6
+    on_arc = np.array([np.cos(turn / 2), np.sin(turn / 2), turn])  # 1 m along an arc turning 0.6 rad
+    sideways = np.array([1.0, -1.0, 0.0])
+    plain = _Prior(prior.mean, prior.sd)
+    assert prior.mahalanobis2(on_arc) - plain.mahalanobis2(on_arc) < 1e-9
+    assert prior.mahalanobis2(sideways) - plain.mahalanobis2(sideways) > 25.0

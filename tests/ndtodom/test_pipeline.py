@@ -57,8 +57,8 @@ def test_lap_previous_reference_runs_and_stays_bounded(lap_bag: Path) -> None:
 
 def test_outputs_and_summary_equal_evo(lap_run) -> None:
     summary, out = lap_run
-    assert sorted(p.name for p in out.iterdir()) == ["ground_truth.tum", "odometry.tum", "scan_map.png", "summary.json",
-                                                     "trajectory.png", "trajectory.tum"]
+    assert sorted(p.name for p in out.iterdir()) == ["ground_truth.tum", "odometry.tum", "results.mcap", "scan_map.png",
+                                                     "summary.json", "trajectory.png", "trajectory.tum"]
     assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(summary))
     ref = file_interface.read_tum_trajectory_file(str(out / "ground_truth.tum"))
     for name, tum in (("ndt", "trajectory.tum"), ("odometry", "odometry.tum")):
@@ -167,7 +167,7 @@ def test_single_scan_writes_a_one_pose_trajectory(tmp_path: Path) -> None:
     assert result.problem is None and len(result.trajectory) == 1
     assert result.summary["pairs_matched"] == 0 and any("only one usable scan" in w for w in result.summary["warnings"])
     names = [p.name for p in write_ndt_odom(result, tmp_path / "out")]
-    assert names == ["trajectory.tum", "trajectory.png", "scan_map.png", "summary.json"]
+    assert names == ["trajectory.tum", "trajectory.png", "scan_map.png", "results.mcap", "summary.json"]
     assert len(read_tum(tmp_path / "out" / "trajectory.tum")) == 1
 
 

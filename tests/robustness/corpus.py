@@ -53,9 +53,10 @@ RANDOM = FIXTURES / "sim_random_nocloud_20s"
 # The output names each command documents (README); a successful --force run may replace only these.
 OWN_OUTPUTS = {
     "tf point": ("point.csv", "point.png", "summary.json"),
-    "map-cloud": ("cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "summary.json"),
-    "ndt-odom": ("trajectory.tum", "odometry.tum", "ground_truth.tum", "trajectory.png", "scan_map.png", "summary.json"),
-    "grid": ("map.pgm", "map.yaml", "map.png", "summary.json"),
+    "map-cloud": ("cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "summary.json", "results.mcap"),
+    "ndt-odom": ("trajectory.tum", "odometry.tum", "ground_truth.tum", "trajectory.png", "scan_map.png", "summary.json",
+                 "results.mcap"),
+    "grid": ("map.pgm", "map.yaml", "map.png", "summary.json", "results.mcap"),
 }
 USER_FILES: dict[str, bytes | None] = {
     "notes.txt": b"my notes about this run: keep them\n",

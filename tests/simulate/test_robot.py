@@ -10,7 +10,16 @@ from bagtools.transforms import se2_compose, se2_inverse
 from simulate.robot import ROUTE_NAMES, Limits, amcl_map_to_odom, drive, make_route, wheel_odometry
 from simulate.robot.amcl import UPDATE_MIN_A_RAD, UPDATE_MIN_D_M
 from simulate.robot.kinematics import integrate_increments, wrap_angle
-from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS, ROBOT_RADIUS_M, T_base_footprint_frame
+from simulate.robot.waffle import (
+    JOINTS,
+    MAX_ANGULAR_RADPS,
+    MAX_LINEAR_MPS,
+    ROBOT_RADIUS_M,
+    WHEEL_RADIUS_M,
+    WHEEL_SEPARATION_M,
+    T_base_footprint_frame,
+    urdf_text,
+)
 from simulate.world import load_world
 
 DT = 1.0 / 30.0
@@ -152,10 +161,74 @@ def test_se2_inverse_composes_to_identity():
     np.testing.assert_allclose(se2_compose(a, se2_inverse(a)), 0.0, atol=1e-12)
 
 
-def test_static_chain_puts_the_optical_frame_z_forward_x_right_y_down():
-    T = T_base_footprint_frame("camera_rgb_optical_frame")
-    np.testing.assert_allclose(T[:3, 2], [1, 0, 0], atol=1e-12)
-    np.testing.assert_allclose(T[:3, 0], [0, -1, 0], atol=1e-12)
-    np.testing.assert_allclose(T[:3, 1], [0, 0, -1], atol=1e-12)
-    np.testing.assert_allclose(T[:3, 3], [0.064 + 0.005, -0.065 + 0.018, 0.010 + 0.094 + 0.013], atol=1e-12)
-    np.testing.assert_allclose(T_base_footprint_frame("base_scan")[:3, 3], [-0.064, 0.0, 0.131], atol=1e-12)
+@pytest.mark.parametrize(("frame", "xyz"), [("camera_rgb_optical_frame", (0.005, 0.018, 0.013)),
+                                              ("camera_depth_optical_frame", (0.005, 0.028, 0.013))])
+def test_static_chain_puts_the_optical_frames_z_forward_x_right_y_down(frame, xyz):
+    T = T_base_footprint_frame(frame)
+    # URDF rpy (-1.57, 0, -1.57): within 1e-3 of the exact optical rotation
+    np.testing.assert_allclose(T[:3, 2], [1, 0, 0], atol=1e-3)
+    np.testing.assert_allclose(T[:3, 0], [0, -1, 0], atol=1e-3)
+    np.testing.assert_allclose(T[:3, 1], [0, 0, -1], atol=1e-3)
+    np.testing.assert_allclose(T[:3, 3], [0.064 + xyz[0], -0.065 + xyz[1], 0.010 + 0.094 + xyz[2]], atol=1e-12)
+    # base_scan at z 0.122 above base_link, as in the URDF robot_state_publisher publishes
+    np.testing.assert_allclose(T_base_footprint_frame("base_scan")[:3, 3], [-0.064, 0.0, 0.132], atol=1e-12)
+
+
+def test_joints_are_robotis_waffle_urdf():
+    by_child = {j.child: j for j in JOINTS}
+    expected = {
+        "base_link": ("base_footprint", "fixed", (0, 0, 0.010)),
+        "wheel_left_link": ("base_link", "continuous", (0, 0.144, 0.023)),
+        "wheel_right_link": ("base_link", "continuous", (0, -0.144, 0.023)),
+        "caster_back_right_link": ("base_link", "fixed", (-0.177, -0.064, -0.004)),
+        "caster_back_left_link": ("base_link", "fixed", (-0.177, 0.064, -0.004)),
+        "imu_link": ("base_link", "fixed", (0, 0, 0.068)),
+        "base_scan": ("base_link", "fixed", (-0.064, 0, 0.122)),
+        "camera_link": ("base_link", "fixed", (0.064, -0.065, 0.094)),
+        "camera_rgb_frame": ("camera_link", "fixed", (0.005, 0.018, 0.013)),
+        "camera_rgb_optical_frame": ("camera_rgb_frame", "fixed", (0, 0, 0)),
+        "camera_depth_frame": ("camera_link", "fixed", (0.005, 0.028, 0.013)),
+        "camera_depth_optical_frame": ("camera_depth_frame", "fixed", (0, 0, 0)),
+    }
+    assert set(by_child) == set(expected)
+    for child, (parent, kind, xyz) in expected.items():
+        j = by_child[child]
+        assert (j.parent, j.kind) == (parent, kind), child
+        np.testing.assert_allclose(j.xyz_m, xyz, atol=1e-12)
+    # the wheel axis (joint z, after rpy -1.57 about x) points to the robot's left: +angle rolls forward
+    T = by_child["wheel_left_link"].matrix()
+    np.testing.assert_allclose(T[:3, 2], [0, 1, 0], atol=1e-3)
+
+
+def test_urdf_text_parses_and_matches_the_joints():
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(urdf_text())
+    assert root.tag == "robot" and root.get("name") == "turtlebot3_waffle"
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    assert set(joints) == {j.name for j in JOINTS}
+    links = {link.get("name") for link in root.findall("link")}
+    assert links == {"base_footprint"} | {j.child for j in JOINTS}
+    for j in JOINTS:
+        el = joints[j.name]
+        assert el.get("type") == j.kind
+        assert el.find("parent").get("link") == j.parent and el.find("child").get("link") == j.child
+        origin = el.find("origin")
+        np.testing.assert_allclose([float(v) for v in origin.get("xyz").split()], j.xyz_m)
+        np.testing.assert_allclose([float(v) for v in origin.get("rpy").split()], j.rpy_rad)
+
+
+def test_wheel_angles_integrate_the_encoder_motion_the_odometry_used(world):
+    motion = _drive(world, "lap", 20.0)
+    for level in ("none", "realistic", "high"):
+        odom = wheel_odometry(motion, level, np.random.default_rng(3))
+        assert odom.wheel_left_rad[0] == odom.wheel_right_rad[0] == 0.0
+        d_left, d_right = np.diff(odom.wheel_left_rad), np.diff(odom.wheel_right_rad)
+        # wheel angle x radius is the distance the odometry integrated, step by step
+        np.testing.assert_allclose(0.5 * (d_left + d_right) * WHEEL_RADIUS_M, odom.v_mps * DT, atol=1e-12)
+        np.testing.assert_allclose((d_right - d_left) * WHEEL_RADIUS_M / WHEEL_SEPARATION_M, odom.w_radps * DT,
+                                   atol=1e-12)
+    # and the wheels turn about as far as the robot drove
+    exact = wheel_odometry(motion, "none", np.random.default_rng(3))
+    travel_m = 0.5 * (exact.wheel_left_rad[-1] + exact.wheel_right_rad[-1]) * WHEEL_RADIUS_M
+    assert travel_m == pytest.approx(np.sum(motion.v_mps) * DT, rel=1e-9) and travel_m > 3.0

@@ -216,3 +216,52 @@ def test_camera_rejects_bad_parameters(tb3: World) -> None:
         DepthCamera(near_m=6.0)
     with pytest.raises(ValueError):
         DepthCamera().points(tb3, np.eye(3), None)
+
+
+def test_imu_noise_statistics_are_turtlebot3_gazebo_s():
+    from simulate.robot.controller import Motion
+    from simulate.sensors import Imu
+
+    # a standing robot for 100 s: readings are gravity and noise only
+    n = 3000
+    still = Motion(1 / 30, np.zeros(n), np.zeros(n), np.zeros((n + 1, 3)))
+    imu = Imu()
+    t = np.arange(int(100 * imu.rate_hz)) / imu.rate_hz
+    s = imu.samples(still, t, np.random.default_rng(0))
+    gyro, acc = s.angular_velocity_radps, s.linear_acceleration_mps2
+    np.testing.assert_allclose(gyro.std(axis=0), 2e-4, rtol=0.03)
+    np.testing.assert_allclose(acc.std(axis=0), 1.7e-2, rtol=0.03)
+    np.testing.assert_allclose(gyro.mean(axis=0), 0.0, atol=1e-5)
+    np.testing.assert_allclose(acc.mean(axis=0), [0.0, 0.0, 9.8], atol=1e-3)
+    np.testing.assert_allclose(s.quat_xyzw, np.tile([0, 0, 0, 1.0], (len(t), 1)))
+    assert np.allclose(imu.angular_velocity_covariance.reshape(3, 3), np.eye(3) * 4e-8)
+    assert np.allclose(imu.linear_acceleration_covariance.reshape(3, 3), np.eye(3) * 2.89e-4)
+
+
+def test_imu_measures_the_turn_rate_centripetal_and_forward_acceleration():
+    from simulate.robot.controller import Motion
+    from simulate.robot.kinematics import integrate_increments
+    from simulate.sensors import Imu
+
+    dt, n = 1 / 30, 300
+    v = np.minimum(np.arange(n) * 0.01, 0.2)  # accelerate at 0.3 m/s^2, then cruise
+    w = np.full(n, 0.5)
+    motion = Motion(dt, v, w, integrate_increments((1.0, 2.0, 0.3), v * dt, w * dt))
+    t = np.arange(int(n * dt * 200)) / 200.0
+    s = Imu().samples(motion, t, None)
+    k = np.minimum((t / dt).astype(int), n - 1)
+    np.testing.assert_allclose(s.angular_velocity_radps[:, 2], 0.5)
+    np.testing.assert_allclose(s.linear_acceleration_mps2[:, 1], v[k] * 0.5)  # v w, to the left
+    accelerating = k[(k > 0) & (k < 19)]
+    np.testing.assert_allclose(s.linear_acceleration_mps2[(k > 0) & (k < 19), 0], 0.01 / dt)
+    assert len(accelerating) > 0 and np.all(s.linear_acceleration_mps2[k > 25, 0] == 0.0)
+    yaw = 2.0 * np.arctan2(s.quat_xyzw[:, 2], s.quat_xyzw[:, 3])
+    np.testing.assert_allclose(np.unwrap(yaw), motion.pose_at_offset(t)[:, 2], atol=1e-9)
+
+
+def test_depth_camera_intrinsics_matrices():
+    cam = DepthCamera(width=160, height=120)
+    np.testing.assert_allclose(cam.K, [[cam.focal_px, 0, 79.5], [0, cam.focal_px, 59.5], [0, 0, 1]])
+    np.testing.assert_allclose(cam.P[:, :3], cam.K)
+    assert not cam.P[:, 3].any()
+    assert cam.focal_px == pytest.approx(160 / (2 * np.tan(1.02974 / 2)))

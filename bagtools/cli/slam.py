@@ -1,0 +1,72 @@
+"""``bagtools slam``: laser SLAM of a bag: laser odometry, loop closure, a GTSAM pose graph, the map."""
+
+from __future__ import annotations
+
+import click
+
+
+@click.command("slam")
+@click.argument("bag", type=click.Path(path_type=str))
+@click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
+@click.option("--topic", default="/scan", show_default=True, help="LaserScan topic.")
+@click.option("--resolution", type=float, default=0.05, show_default=True,
+              help="Map cell side in METRES (0.05: 5 cm cells; note: `bagtools grid --resolution` is cells per metre).")
+@click.option("--loop-search-radius", type=float, default=5.0, show_default=True,
+              help="Match keyframes this far apart [m] (plus their estimated drift) for loop closure.")
+@click.option("--loop-min-score", type=float, default=0.5, show_default=True,
+              help="Correlative score in [0, 1] a loop-closure match needs.")
+@click.option("--no-loop-closure", is_flag=True, help="Keep the laser odometry's trajectory (no loop search).")
+@click.option("--no-odometry", is_flag=True, help="Ignore the bag's wheel odometry (/odom, tf): scans only.")
+@click.option("--max-range", type=float, default=None,
+              help="Use returns up to this range [m] (map and loop closure); farther ones only clear free space. "
+                   "[default: 20 m]")
+@click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, paths, scans and loops for Foxglove).")
+@click.option("--force", is_flag=True, help="Overwrite existing output files.")
+def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
+         no_loop_closure: bool, no_odometry: bool, max_range: float | None, no_mcap: bool, force: bool) -> None:
+    """SLAM of BAG's laser scans: laser odometry, loop closures, a pose graph optimized with GTSAM, the map.
+
+    Writes OUT/trajectory.tum (the optimized robot base pose at every scan, in
+    the map frame), odometry.tum (the laser odometry alone), pose_graph.g2o
+    (keyframes and constraints, VERTEX_SE2/EDGE_SE2), map.pgm + map.yaml (nav2
+    map_server format), map.png (the map, the trajectory and the loop
+    closures), summary.json (keyframes, loop candidates accepted and rejected by
+    reason, optimization, timing, and for bags with /ground_truth the errors of
+    SLAM and of the laser odometry), ground_truth.tum (bags with /ground_truth)
+    and results.mcap (/map, the paths, /tf, the scans and /loop_closures, to
+    open in Foxglove or replay for RViz).
+
+    \b
+    Example:
+      bagtools slam out/sim --out out/slam
+      bagtools slam csail.mcap --out slam_scans --no-odometry --max-range 30
+      python step_error.py out/slam/trajectory.tum out/slam/ground_truth.tum --align
+    """
+    from bagtools.outputs import check_outputs
+    from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
+
+    check_outputs(out_dir, SLAM_FILES, force)  # fail before the work, not after it
+
+    options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
+                          loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
+                          loop_min_score=loop_min_score, keep_scans=not no_mcap)
+    result = SlamPipeline(bag, options).run()
+    for warning in result.summary.get("warnings", []):
+        click.echo(f"bagtools: warning: {warning}", err=True)
+    written = write_slam(result, out_dir, force, mcap=not no_mcap)
+    s = result.summary
+    loops = s["loop_closure"]
+    reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())
+    click.echo(f"{s['scans']} scans, {s['keyframes']} keyframes; {loops['candidates']} loop candidates: "
+               f"{loops['accepted']} accepted, {loops['rejected']} rejected{f' ({reasons})' if reasons else ''}; "
+               f"optimized in {s['optimization']['time_s']:.2f} s; {s['timing_s']['total']:.1f} s in all")
+    click.echo(f"wrote {', '.join(p.name for p in written)} in {out_dir}")
+    for name, label in (("errors_slam", "SLAM"), ("errors_front_end", "laser odometry")):
+        errors = s.get(name)
+        if not errors:
+            continue
+        ape = errors["ape_aligned_m"].get("rmse")
+        gap = errors["relative_gap_20"].get("trans_mean_m")
+        if ape is not None:
+            gap_text = f"{gap:.3f} m" if gap is not None else "n/a"
+            click.echo(f"{label}: APE {ape:.3f} m after alignment (rmse), motion error over 20 scans {gap_text} (mean)")

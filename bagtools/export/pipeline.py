@@ -1,0 +1,73 @@
+"""Exporting one topic: read it message by message, turn each into rows, hand them to the file's sink."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bagtools.errors import BagtoolsError, TopicError
+from bagtools.export.sinks import FORMATS, open_sink
+from bagtools.export.tables import ROWS
+from bagtools.io import open_bag
+from bagtools.outputs import atomic_path, check_writable
+from bagtools.progress import progress
+
+
+@dataclass
+class ExportSummary:
+    """What was written: messages read, rows, the columns (list columns as ``name[]``) and warnings."""
+
+    path: Path
+    format: str
+    msgtype: str
+    messages: int = 0
+    rows: int = 0
+    columns: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def output_format(out: str | Path) -> str:
+    """'csv', 'parquet' or 'npz' from the suffix of ``out`` (raises :class:`BagtoolsError` for another)."""
+    fmt = FORMATS.get(Path(out).suffix.lower())
+    if fmt is None:
+        raise BagtoolsError(f"unknown output format {Path(out).suffix or '(no suffix)'!r}: name the file .csv, "
+                            ".parquet or .npz", out)
+    return fmt
+
+
+def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool = False) -> ExportSummary:
+    """Write every message of ``topic`` as rows into ``out`` (format by suffix), atomically.
+
+    Refuses an existing ``out`` without ``force``, a topic the bag lacks and a
+    message type with no table (see :mod:`bagtools.export.tables`), before any work.
+    """
+    out = Path(out)
+    fmt = output_format(out)
+    check_writable(out, force)
+    with open_bag(bag_path) as bag:
+        info = bag.require_topic(topic)
+        rows_of = ROWS.get(info.msgtype)
+        if rows_of is None:
+            kinds = "LaserScan, PointCloud2, Odometry, TF (TFMessage) and PointStamped"
+            raise TopicError(f"topic '{topic}' has type {info.msgtype}; export reads {kinds}", bag.path)
+        summary = ExportSummary(out, fmt, info.msgtype)
+        with atomic_path(out, force) as staged:
+            sink = open_sink(staged, fmt)
+            try:
+                for rec in progress(bag.messages([topic]), total=info.count, desc="exporting", unit="msg"):
+                    chunk = rows_of(rec)
+                    if not summary.columns:
+                        summary.columns = [name + ("[]" if column.ndim == 2 or column.dtype == object
+                                                   and len(column) and not isinstance(column[0], str) else "")
+                                           for name, column in chunk.items()]
+                    sink.write(chunk)
+                    summary.messages += 1
+                    summary.rows += len(chunk["stamp_ns"])
+            finally:
+                sink.close()
+            if summary.messages == 0:
+                raise BagtoolsError(f"no message on {topic} could be read, so there is nothing to export", bag.path)
+        summary.warnings = list(bag.warnings) + [
+            f"{n} message(s) on {topic} lack the column {name} of the first; left empty"
+            for name, n in sink.columns.filled.items()]
+    return summary

@@ -1,0 +1,251 @@
+"""Table files, written a chunk of rows at a time: CSV (csv module), Parquet (pyarrow) and NPZ (numpy).
+
+List columns (a scan's ranges, an odometry covariance): Parquet keeps them as
+list columns and NPZ as 2-D arrays (ragged lists padded with NaN); CSV
+spreads them over numbered columns ``ranges.0``, ``ranges.1``, ... as wide as
+the first row's list (shorter lists leave empty cells; a longer one is refused:
+use Parquet or NPZ for scans whose beam count changes). Columns are fixed by
+the first chunk; a later message without one of them gets an empty value (NaN
+in NPZ).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from bagtools.errors import BagtoolsError
+from bagtools.export.tables import Chunk
+
+FORMATS = {".csv": "csv", ".parquet": "parquet", ".npz": "npz"}
+PARQUET_BATCH_ROWS = 65_536
+
+
+class Sink(Protocol):
+    """Where the rows go."""
+
+    def write(self, chunk: Chunk) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def _is_ragged(column: np.ndarray) -> bool:
+    return column.dtype == object and column.ndim == 1 and column.size > 0 and isinstance(column[0], np.ndarray)
+
+
+def _rows(chunk: Chunk) -> int:
+    return len(next(iter(chunk.values()))) if chunk else 0
+
+
+def _fill(template: np.ndarray, n: int) -> np.ndarray:
+    """n empty values shaped like a column: NaN for floats, 0 for integers, '' for strings, empty lists."""
+    if _is_ragged(template):
+        out = np.empty(n, dtype=object)
+        for i in range(n):
+            out[i] = np.empty(0, dtype=template[0].dtype)
+        return out
+    shape = (n,) + template.shape[1:]
+    if template.dtype.kind == "f":
+        return np.full(shape, np.nan, dtype=template.dtype)
+    if template.dtype == object:
+        return np.full(shape, "", dtype=object)
+    return np.zeros(shape, dtype=template.dtype)
+
+
+class _Columns:
+    """Keeps every chunk to the first chunk's columns (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.templates: dict[str, np.ndarray] | None = None
+        self.filled: dict[str, int] = {}
+
+    def conform(self, chunk: Chunk) -> Chunk:
+        if self.templates is None:
+            self.templates = {name: column[:1] for name, column in chunk.items()}
+            return chunk
+        n = _rows(chunk)
+        out = {}
+        for name, template in self.templates.items():
+            if name in chunk:
+                out[name] = chunk[name]
+            else:
+                self.filled[name] = self.filled.get(name, 0) + 1
+                out[name] = _fill(template, n)
+        return out
+
+
+class CsvSink:
+    """CSV with a header row; float32 values in their shortest form, stamps as exact integers."""
+
+    def __init__(self, path: Path) -> None:
+        self._file = open(path, "w", newline="", encoding="utf-8")
+        self._writer = csv.writer(self._file)
+        self._columns = _Columns()
+        self._widths: dict[str, int] = {}
+
+    def write(self, chunk: Chunk) -> None:
+        chunk = self._columns.conform(chunk)
+        if not self._widths:
+            header = []
+            for name, column in chunk.items():
+                width = len(column[0]) if _is_ragged(column) else (column.shape[1] if column.ndim == 2 else 0)
+                self._widths[name] = width
+                header += [f"{name}.{i}" for i in range(width)] if column.ndim == 2 or _is_ragged(column) else [name]
+            self._writer.writerow(header)
+        cells: list[list] = []
+        for name, column in chunk.items():
+            width = self._widths[name]
+            if _is_ragged(column):
+                cells += self._ragged(name, column, width)
+            elif column.ndim == 2:
+                cells += [_text(column[:, i]) for i in range(column.shape[1])]
+            else:
+                cells.append(_text(column))
+        self._writer.writerows(zip(*cells))
+
+    def _ragged(self, name: str, column: np.ndarray, width: int) -> list[list]:
+        lengths = [len(v) for v in column]
+        if max(lengths, default=0) > width:
+            raise BagtoolsError(f"a message has {max(lengths)} values in {name}, more than the {width} of the first: "
+                                "CSV columns are fixed by the first message; export to .parquet or .npz instead")
+        table = np.full((len(column), width), np.nan, dtype=column[0].dtype)
+        for i, values in enumerate(column):
+            table[i, :len(values)] = values
+        return [[text if j < n else "" for text, n in zip(_text(table[:, j]), lengths)] for j in range(width)]
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _text(column: np.ndarray) -> list:
+    """Cell values: float32 in their shortest decimal form, everything else as Python values."""
+    if column.dtype == np.float32:
+        return column.astype(str).tolist()
+    return column.tolist()
+
+
+class ParquetSink:
+    """Parquet (pyarrow), row groups of about PARQUET_BATCH_ROWS rows; lists as list columns."""
+
+    def __init__(self, path: Path) -> None:
+        try:
+            import pyarrow  # noqa: F401
+            import pyarrow.parquet  # noqa: F401
+        except ImportError as err:
+            raise BagtoolsError("writing .parquet needs pyarrow (pip install pyarrow)", path) from err
+        self.path = path
+        self._writer = None
+        self._pending: list[Chunk] = []
+        self._rows = 0
+        self._columns = _Columns()
+
+    def write(self, chunk: Chunk) -> None:
+        chunk = self._columns.conform(chunk)
+        self._pending.append(chunk)
+        self._rows += _rows(chunk)
+        if self._rows >= PARQUET_BATCH_ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        if not self._pending:
+            return
+        names = list(self._pending[0])
+        arrays = [_arrow_column([c[name] for c in self._pending]) for name in names]
+        table = pa.Table.from_arrays(arrays, names=names)
+        if self._writer is None:
+            self._writer = pq.ParquetWriter(self.path, table.schema)
+        self._writer.write_table(table.cast(self._writer.schema))
+        self._pending, self._rows = [], 0
+
+    def close(self) -> None:
+        self._flush()
+        if self._writer is not None:
+            self._writer.close()
+
+
+def _arrow_column(parts: list[np.ndarray]):
+    import pyarrow as pa
+
+    if _is_ragged(parts[0]):
+        lists = [v for part in parts for v in part]
+        offsets = np.zeros(len(lists) + 1, dtype=np.int64)
+        np.cumsum([len(v) for v in lists], out=offsets[1:])
+        values = np.concatenate(lists) if lists else np.empty(0, dtype=np.float32)
+        return pa.LargeListArray.from_arrays(pa.array(offsets), pa.array(values))
+    column = np.concatenate(parts)
+    if column.ndim == 2:
+        return pa.FixedSizeListArray.from_arrays(pa.array(np.ascontiguousarray(column).reshape(-1)), column.shape[1])
+    if column.dtype == object:
+        return pa.array(column.tolist(), type=pa.string())
+    return pa.array(column)
+
+
+class NpzSink:
+    """NPZ (numpy), one array per column, loadable without pickle; built in memory, written at the end."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._parts: dict[str, list[np.ndarray]] = {}
+        self._columns = _Columns()
+
+    def write(self, chunk: Chunk) -> None:
+        for name, column in self._columns.conform(chunk).items():
+            self._parts.setdefault(name, []).append(column)
+
+    def close(self) -> None:
+        arrays = {name: _numpy_column(parts) for name, parts in self._parts.items()}
+        with open(self.path, "wb") as f:
+            np.savez(f, **arrays)
+
+
+def _numpy_column(parts: list[np.ndarray]) -> np.ndarray:
+    if _is_ragged(parts[0]):
+        lists = [v for part in parts for v in part]
+        width = max((len(v) for v in lists), default=0)
+        out = np.full((len(lists), width), np.nan, dtype=lists[0].dtype if lists else np.float32)
+        for i, values in enumerate(lists):
+            out[i, :len(values)] = values
+        return out
+    column = np.concatenate(parts)
+    return column.astype(str) if column.dtype == object else column
+
+
+class Batched:
+    """Gathers small chunks (a message's row or few) into batches of about ``rows`` rows before a sink writes them:
+    the per-call cost of the sinks is paid once per batch, not once per message."""
+
+    def __init__(self, sink: Sink, rows: int = 8192) -> None:
+        self.sink = sink
+        self.rows = rows
+        self.columns = _Columns()
+        self._pending: list[Chunk] = []
+        self._count = 0
+
+    def write(self, chunk: Chunk) -> None:
+        self._pending.append(self.columns.conform(chunk))
+        self._count += _rows(chunk)
+        if self._count >= self.rows:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            names = list(self._pending[0])
+            self.sink.write({name: np.concatenate([c[name] for c in self._pending]) for name in names})
+        self._pending, self._count = [], 0
+
+    def close(self) -> None:
+        try:
+            self._flush()
+        finally:
+            self.sink.close()
+
+
+def open_sink(path: Path, fmt: str) -> Batched:
+    """The sink writing ``fmt`` ('csv', 'parquet' or 'npz') to ``path``, batched."""
+    return Batched({"csv": CsvSink, "parquet": ParquetSink, "npz": NpzSink}[fmt](path))

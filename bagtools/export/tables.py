@@ -1,0 +1,132 @@
+"""Messages as table rows: flat columns per message type, stamps as int nanoseconds.
+
+Every table starts with ``stamp_ns`` (the header stamp; for TF, each
+transform's own), ``log_time_ns`` (bag time) and ``frame_id``, then the
+message's fields flattened:
+
+- LaserScan: one row per message: the scan geometry, then ``ranges`` and
+  ``intensities`` (a list per row);
+- PointCloud2: one row per point (all height x width points, NaN kept, as
+  recorded): ``x y z`` and, when the cloud has them, ``intensity`` and ``r g b``;
+- Odometry: ``child_frame_id``, position ``x y z``, orientation ``qx qy qz qw``
+  (ROS order), twist ``vx vy vz wx wy wz`` (in the child frame), and the
+  covariances as 36-element lists (row-major, as in the message);
+- TF (tf2_msgs/TFMessage, ROS 1 tf/tfMessage): one row per transform:
+  ``child_frame_id`` (``frame_id`` is the parent), ``x y z qx qy qz qw``;
+- PointStamped: ``x y z``.
+
+A chunk is ``{column: array}``: 1-D arrays (one value per row), 2-D arrays
+(a fixed-length list per row) or object arrays of 1-D arrays (lists whose
+length varies).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from bagtools.io import (
+    LASERSCAN_TYPES, ODOMETRY_TYPES, POINTCLOUD2_TYPES, TF_TYPES, Record, decode_laserscan, decode_odometry,
+    decode_pointcloud2, decode_tf_message, stamp_to_ns,
+)
+
+POINTSTAMPED_TYPES = ("geometry_msgs/msg/PointStamped",)
+
+Chunk = dict[str, np.ndarray]
+
+
+def _head(n: int, stamps_ns: np.ndarray | int, log_time_ns: int, frame_ids: np.ndarray | str) -> Chunk:
+    return {
+        "stamp_ns": np.broadcast_to(np.asarray(stamps_ns, dtype=np.int64), (n,)),
+        "log_time_ns": np.full(n, log_time_ns, dtype=np.int64),
+        "frame_id": np.broadcast_to(np.asarray(frame_ids, dtype=object), (n,)),
+    }
+
+
+def laserscan_rows(rec: Record) -> Chunk:
+    """One row per LaserScan: geometry (rad, s, m), then ``ranges`` and ``intensities`` (float32 lists)."""
+    msg = rec.msg
+    scan = decode_laserscan(msg)
+    chunk = _head(1, scan.stamp_ns, rec.log_time_ns, scan.frame_id)
+    for name in ("angle_min", "angle_max", "angle_increment", "time_increment", "scan_time", "range_min", "range_max"):
+        chunk[name] = np.array([float(getattr(msg, name))])
+    chunk["ranges"] = _one_list(scan.ranges_m)
+    chunk["intensities"] = _one_list(scan.intensities)
+    return chunk
+
+
+def _one_list(values: np.ndarray) -> np.ndarray:
+    out = np.empty(1, dtype=object)
+    out[0] = np.asarray(values, dtype=np.float32)
+    return out
+
+
+def pointcloud2_rows(rec: Record) -> Chunk:
+    """One row per point: x y z (float32), intensity and r g b when the cloud has them."""
+    cloud = decode_pointcloud2(rec.msg, keep_nan=True, attributes=True)
+    n = cloud.points.shape[0]
+    chunk = _head(n, cloud.stamp_ns, rec.log_time_ns, cloud.frame_id)
+    for k, axis in enumerate("xyz"):
+        chunk[axis] = cloud.points[:, k]
+    if cloud.intensity is not None:
+        chunk["intensity"] = cloud.intensity
+    if cloud.rgb is not None:
+        for k, channel in enumerate("rgb"):
+            chunk[channel] = cloud.rgb[:, k]
+    return chunk
+
+
+def odometry_rows(rec: Record) -> Chunk:
+    """One row per Odometry: pose (m, ROS-order quaternion), twist (m/s, rad/s, child frame), covariances."""
+    odom = decode_odometry(rec.msg)
+    chunk = _head(1, odom.stamp_ns, rec.log_time_ns, odom.frame_id)
+    chunk["child_frame_id"] = np.array([odom.child_frame_id], dtype=object)
+    values = np.concatenate([odom.position_m, odom.orientation_xyzw, odom.linear_mps, odom.angular_radps])
+    for name, value in zip(("x", "y", "z", "qx", "qy", "qz", "qw", "vx", "vy", "vz", "wx", "wy", "wz"), values):
+        chunk[name] = np.array([value])
+    chunk["pose_covariance"] = odom.pose_covariance.reshape(1, 36)
+    chunk["twist_covariance"] = odom.twist_covariance.reshape(1, 36)
+    return chunk
+
+
+def tf_rows(rec: Record) -> Chunk:
+    """One row per transform of a TFMessage: parent as ``frame_id``, ``child_frame_id``, translation (m), rotation."""
+    tf = decode_tf_message(rec.msg)
+    n = len(tf)
+    chunk = _head(n, tf.stamp_ns, rec.log_time_ns, tf.parent)
+    chunk["child_frame_id"] = tf.child
+    for k, name in enumerate(("x", "y", "z")):
+        chunk[name] = tf.translation[:, k]
+    for k, name in enumerate(("qx", "qy", "qz", "qw")):
+        chunk[name] = tf.rotation_xyzw[:, k]
+    return chunk
+
+
+def pointstamped_rows(rec: Record) -> Chunk:
+    """One row per PointStamped: x y z (m)."""
+    msg = rec.msg
+    chunk = _head(1, stamp_to_ns(msg.header.stamp), rec.log_time_ns, msg.header.frame_id)
+    for name in "xyz":
+        chunk[name] = np.array([float(getattr(msg.point, name))])
+    return chunk
+
+
+ROWS: dict[str, Callable[[Record], Chunk]] = {
+    **{t: laserscan_rows for t in LASERSCAN_TYPES},
+    **{t: pointcloud2_rows for t in POINTCLOUD2_TYPES},
+    **{t: odometry_rows for t in ODOMETRY_TYPES},
+    **{t: tf_rows for t in TF_TYPES},
+    **{t: pointstamped_rows for t in POINTSTAMPED_TYPES},
+}
+"""Message type -> the function that turns one message into rows."""
+
+#: What a bare decode of each type costs (the benchmark's baseline): the decoder without the flattening.
+DECODERS: dict[str, Callable[[Any], Any]] = {
+    **{t: decode_laserscan for t in LASERSCAN_TYPES},
+    **{t: (lambda msg: decode_pointcloud2(msg, keep_nan=True, attributes=True)) for t in POINTCLOUD2_TYPES},
+    **{t: decode_odometry for t in ODOMETRY_TYPES},
+    **{t: decode_tf_message for t in TF_TYPES},
+    **{t: (lambda msg: msg.point) for t in POINTSTAMPED_TYPES},
+}

@@ -1,0 +1,496 @@
+"""Loop-closure search: which older keyframes a new keyframe may see again, the match, and the checks.
+
+For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
+
+1. **Reach.** The back end gives, for every node, the graph distance ``D(a)`` to
+   ``b`` (metres of odometry along the shortest path through the graph; a loop
+   edge counts ``loop_edge_m``): the relative pose of ``a`` and ``b`` is known
+   to about ``sigma_t = drift_per_m * D`` metres and ``sigma_r =
+   drift_rad_per_m * D`` radians. Older keyframes at least ``min_travel_m``
+   behind ``b`` along the path (and far enough back in the chain that the two
+   local maps below share no keyframe: else the match only repeats the front
+   end's own chain) whose estimated position lies within ``search_radius_m +
+   gate_sigmas * sigma_t`` of ``b``'s are candidates.
+   Candidates are grouped into runs of consecutive keyframes (one pass of the
+   robot through the place); the nearest keyframe of each run is tried, the
+   ``max_candidates`` nearest runs at most, and a run already tied to ``b`` by
+   a loop accepted within the last ``loop_spacing_m`` of path is skipped.
+2. **Match** (:meth:`LoopClosureSearch.match`). The *old map* is keyframe
+   ``a`` and its ``old_map_keyframes`` neighbours on each side moved into
+   ``a``'s frame (built once per ``a`` and cached: a
+   :class:`~bagtools.ndt.CorrelativeReference` and an
+   :class:`~bagtools.ndt.NdtReference`); the *new map* is ``b`` and its
+   ``new_map_keyframes`` predecessors moved into ``b``'s frame (several scans:
+   a 180-degree laser's one scan sees too little to tell a corridor's places
+   apart). :func:`~bagtools.ndt.match_scans_grid` searches a window around the
+   estimated relative pose, +- ``gate_sigmas`` sigmas (at least
+   ``min_window_m``/``min_window_rad``, at most the search radius and a full
+   turn), in steps of ``resolution_m`` and of the angle that moves a point
+   ``angular_reach_m`` away by one step; NDT (``ndt_cell_m`` cells, widened
+   model) refines the best pose and must stay within
+   ``max_refine_m``/``max_refine_rad`` of it. Wide windows (``wide_window_m``
+   and more: the estimate is unsure) cost tens of milliseconds: at most one is
+   searched per ``wide_spacing_m`` of path.
+3. **Covariance** (:func:`loop_covariance`): the ambiguity of the correlative
+   search (Olson's likelihood-weighted spread around the best pose), the
+   inverse NDT Hessian (large along a corridor, where the match is weak), the
+   laser odometry's floor, and the uncertainty of the two local maps, which the
+   odometry chain assembled (its edges' covariances propagated to each map's
+   centre keyframe).
+4. **Acceptance** (:class:`ConsistencyCheck`): a score of at least
+   ``min_score``; and the match must agree with the current estimate within
+   the gate. When the estimate is sure of the relative pose (``sigma_t`` at
+   most ``sure_sigma_m``) that is enough. Otherwise one match proves little (a
+   corridor or a symmetric room matches in several places), and the match
+   waits up to ``pending_keyframes`` keyframes for a second, from another new
+   keyframe, that is pairwise consistent with it (the cycle loop 1, old chain,
+   loop 2, new chain closes within the gate: E. Olson's single-cluster test in
+   its smallest form); both are then accepted. Unconfirmed matches are rejected.
+
+Every candidate is recorded as a :class:`LoopCandidate` with what happened to it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from bagtools.ndt import CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid
+from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
+
+# Candidate outcomes (summary.json counts them).
+ACCEPTED = "accepted"
+PENDING = "pending"
+LOW_SCORE = "score below min_score"
+REFINE_FAILED = "NDT refinement failed or moved away"
+INCONSISTENT = "disagrees with the estimate"
+UNCONFIRMED = "unconfirmed: no consistent second match"
+OUTLIER = "outlier after optimization"
+TOO_FEW_POINTS = "too few points"
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """Settings of the loop-closure search (see the module docstring; metres, radians).
+
+    The drift rates are the laser odometry's error growth, one sigma per metre
+    of graph distance; they size the search reach, the window and the gates.
+    """
+
+    search_radius_m: float = 5.0
+    min_travel_m: float = 8.0
+    drift_per_m: float = 0.03
+    drift_rad_per_m: float = 0.01
+    loop_edge_m: float = 1.0
+    turn_m_per_rad: float = 0.5
+    gate_sigmas: float = 3.0
+    min_window_m: float = 0.3
+    min_window_rad: float = 0.1
+    resolution_m: float = 0.1
+    angular_reach_m: float = 10.0
+    max_range_m: float = 20.0
+    max_points: int = 1500
+    min_score: float = 0.5
+    old_map_keyframes: int = 3
+    new_map_keyframes: int = 4
+    max_candidates: int = 2
+    wide_window_m: float = 2.0
+    wide_spacing_m: float = 4.0
+    loop_spacing_m: float = 1.0
+    sure_sigma_m: float = 0.3
+    pending_keyframes: int = 10
+    pair_max_path_m: float = 15.0
+    ndt_cell_m: float = 0.5
+    max_refine_m: float = 0.3
+    max_refine_rad: float = 0.1
+    cache_size: int = 64
+
+    def __post_init__(self) -> None:
+        for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m",
+                     "drift_rad_per_m", "loop_edge_m", "angular_reach_m", "gate_sigmas", "min_window_m", "min_window_rad",
+                     "resolution_m", "max_range_m", "loop_spacing_m", "sure_sigma_m", "pair_max_path_m", "ndt_cell_m",
+                     "max_refine_m", "max_refine_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if not 0.0 <= self.min_score <= 1.0:
+            raise ValueError(f"min_score must be in [0, 1], got {self.min_score!r}")
+        for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)!r}")
+        if self.old_map_keyframes < 0 or self.new_map_keyframes < 0 or self.turn_m_per_rad < 0:
+            raise ValueError("old_map_keyframes, new_map_keyframes and turn_m_per_rad must not be negative")
+
+
+@dataclass
+class LoopCandidate:
+    """One loop-closure candidate: old keyframe ``old`` seen again from new keyframe ``new`` (node numbers).
+
+    ``guess``: the estimated pose of ``new`` in ``old``'s frame when searched;
+    ``window``: the search half-widths (m, m, rad); ``sigma``: the estimate's
+    uncertainty of it (m, rad); ``T_old_new``, ``covariance``: the match (None
+    when it failed); ``score``: correlative score in [0, 1]; ``status``:
+    ``ACCEPTED``, ``PENDING`` or why it was rejected; ``time_s``: match time.
+    """
+
+    old: int
+    new: int
+    guess: np.ndarray
+    window: np.ndarray
+    sigma: tuple[float, float]
+    T_old_new: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    score: float = 0.0
+    status: str = PENDING
+    time_s: float = 0.0
+
+    def as_dict(self) -> dict:
+        out = {"old": self.old, "new": self.new, "status": self.status, "score": round(self.score, 4),
+               "sigma_m": round(self.sigma[0], 4), "sigma_rad": round(self.sigma[1], 4),
+               "window": [round(float(v), 4) for v in self.window], "time_ms": round(self.time_s * 1e3, 2)}
+        if self.T_old_new is not None:
+            out["T_old_new"] = [round(float(v), 5) for v in self.T_old_new]
+            out["correction_m"] = round(float(np.hypot(*se2_between(self.guess, self.T_old_new)[:2])), 4)
+        return out
+
+
+def voxel_subsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """The first point of each occupied ``voxel_m`` square cell of (N,2) ``points`` (metres)."""
+    if len(points) == 0:
+        return points
+    cells = np.floor(points / voxel_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    keys = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
+    _, first = np.unique(keys, return_index=True)
+    return points[np.sort(first)]
+
+
+#: Added to every loop covariance (m^2, m^2, rad^2): 1 cm and 0.3 degrees, the laser odometry's floor for its edges.
+COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
+
+
+def _compose_with_covariance(a: np.ndarray, a_cov: np.ndarray, b: np.ndarray,
+                             b_cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """a then b ([x, y, theta]) and the covariance of the result (first order, a and b independent)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    J_a = np.array([[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]])
+    J_b = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return se2_compose(a, b), J_a @ a_cov @ J_a.T + J_b @ b_cov @ J_b.T
+
+
+def _inverse_with_covariance(m: np.ndarray, m_cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of the motion m ([x, y, theta]) and its covariance (first order)."""
+    c, s = math.cos(m[2]), math.sin(m[2])
+    J = np.array([[-c, -s, s * m[0] - c * m[1]], [s, -c, c * m[0] + s * m[1]], [0.0, 0.0, -1.0]])
+    inverse = np.array([-(c * m[0] + s * m[1]), s * m[0] - c * m[1], -m[2]])
+    return inverse, J @ m_cov @ J.T
+
+
+def _adjoint(T: np.ndarray) -> np.ndarray:
+    """SE(2) adjoint of T = [x, y, theta]: maps a perturbation on the left of T to one on its right, inverted."""
+    c, s = math.cos(T[2]), math.sin(T[2])
+    return np.array([[c, -s, T[1]], [s, c, -T[0]], [0.0, 0.0, 1.0]])
+
+
+def ndt_information_inverse(hessian: np.ndarray) -> np.ndarray:
+    """Inverse of an NDT Hessian (3,3) on its positive eigenvalues; a direction without curvature gets 1e2."""
+    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
+    inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
+    return (vectors * inverse) @ vectors.T
+
+
+def loop_covariance(grid: GridMatchResult, ndt_hessian: np.ndarray, T_old_new: np.ndarray,
+                    old_map_covariance: np.ndarray, new_map_covariance: np.ndarray) -> np.ndarray:
+    """Covariance (3,3) of a loop match ``T_old_new`` refined by NDT (m^2, m rad, rad^2; new keyframe's frame).
+
+    The sum of: the spread of the likelihood among the correlative candidates
+    around the best (Olson's covariance without its discretization term
+    step^2 / 12, which the NDT refinement removes): large where the match is
+    ambiguous; the inverse NDT Hessian (the refinement's own precision);
+    :data:`COVARIANCE_FLOOR`, the laser odometry's floor for its edges; and the
+    uncertainty of the two local maps, assembled from keyframes placed by the
+    odometry chain (:meth:`LoopClosureSearch.map_covariance`; the old map's
+    moved into the new keyframe's frame).
+    """
+    discretization = np.diag([grid.resolution_m**2, grid.resolution_m**2, grid.angular_resolution_rad**2]) / 12.0
+    values, vectors = np.linalg.eigh(grid.covariance - discretization)
+    spread = (vectors * np.maximum(values, 0.0)) @ vectors.T
+    back = np.linalg.inv(_adjoint(T_old_new))
+    return (spread + ndt_information_inverse(ndt_hessian) + COVARIANCE_FLOOR + back @ old_map_covariance @ back.T
+            + new_map_covariance)
+
+
+@dataclass
+class _OldMap:
+    correlative: CorrelativeReference
+    ndt: NdtReference
+    covariance: np.ndarray  # of the map's assembly, see LoopClosureSearch.map_covariance
+
+
+class LoopClosureSearch:
+    """Candidates and matches for loop closure over the keyframes seen so far (see the module docstring).
+
+    Args:
+        options: the search settings.
+    """
+
+    def __init__(self, options: LoopOptions | None = None) -> None:
+        self.options = options or LoopOptions()
+        self.points: list[np.ndarray] = []  # per keyframe: returns within max_range_m, base frame
+        self.path_m: list[float] = []  # per keyframe: distance along the path from the first, metres
+        self.motions: list[np.ndarray] = []  # per keyframe: [x, y, theta] from the previous keyframe
+        self.motion_covariances: list[np.ndarray] = []  # and its covariance
+        self._last_wide_m = -math.inf  # path length at the last wide search
+        self._cache: OrderedDict[int, _OldMap] = OrderedDict()
+
+    def add_keyframe(self, points_base: np.ndarray, motion: np.ndarray | None,
+                     motion_covariance: np.ndarray | None = None) -> None:
+        """Record keyframe ``len(self.points)``: its points (N,2) in its base frame, and its motion [x, y, theta]
+        from the previous keyframe with that motion's covariance (None for the first keyframe)."""
+        pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        pts = pts[np.einsum("ij,ij->i", pts, pts) <= self.options.max_range_m**2]
+        self.points.append(pts)
+        self.motions.append(np.zeros(3) if motion is None else np.asarray(motion, dtype=np.float64))
+        self.motion_covariances.append(np.zeros((3, 3)) if motion_covariance is None
+                                       else np.asarray(motion_covariance, dtype=np.float64))
+        step = 0.0 if motion is None else float(np.hypot(motion[0], motion[1]))
+        self.path_m.append((self.path_m[-1] if self.path_m else 0.0) + step)
+
+    def map_covariance(self, centre: int, keyframes: range) -> np.ndarray:
+        """How uncertain a local map is (3,3, centre keyframe's frame): the mean over its keyframes of the
+        covariance of their pose relative to ``centre``, propagated along the chain of motions (first order)."""
+        total = np.zeros((3, 3))
+        for direction in (1, -1):
+            pose, cov = np.zeros(3), np.zeros((3, 3))
+            k = centre
+            while (k + direction) in keyframes:
+                if direction == 1:
+                    m, m_cov = self.motions[k + 1], self.motion_covariances[k + 1]
+                else:  # the motion from k to k - 1 is the inverse of keyframe k's
+                    m, m_cov = _inverse_with_covariance(self.motions[k], self.motion_covariances[k])
+                pose, cov = _compose_with_covariance(pose, cov, m, m_cov)
+                total += cov
+                k += direction
+        return total / max(len(keyframes), 1)
+
+    # -- candidates ------------------------------------------------------------------------------
+
+    def sigmas(self, graph_distance_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Relative-pose uncertainty (m, rad) of nodes at graph distances ``graph_distance_m`` (m)."""
+        o = self.options
+        d = np.asarray(graph_distance_m, dtype=np.float64)
+        return o.drift_per_m * d, o.drift_rad_per_m * d
+
+    def candidates(self, new: int, poses: np.ndarray, graph_distance_m: np.ndarray,
+                   recent_loops: list[tuple[int, int]]) -> list[int]:
+        """Old keyframes to match against keyframe ``new`` (nearest first).
+
+        ``poses`` (N,3): the current estimate of every keyframe so far;
+        ``graph_distance_m`` (N,): each one's graph distance to ``new``;
+        ``recent_loops``: (old, new) node pairs of accepted loops.
+        """
+        o = self.options
+        path = np.asarray(self.path_m)
+        # far enough back along the path, and the two local maps share no keyframe (else the match repeats the chain)
+        last = new - o.new_map_keyframes - o.old_map_keyframes - 1
+        old = np.flatnonzero(path[new] - path[: max(last, 0)] >= o.min_travel_m)
+        if old.size == 0:
+            return []
+        dist = np.hypot(*(poses[old, :2] - poses[new, :2]).T)
+        sigma_t = self.sigmas(graph_distance_m)[0]
+        reach = dist <= o.search_radius_m + o.gate_sigmas * sigma_t[old]
+        old, dist = old[reach], dist[reach]
+        if old.size == 0:
+            return []
+        # Runs of consecutive keyframes: one pass through the place each.
+        breaks = np.flatnonzero(np.diff(old) > 1) + 1
+        picks = []
+        for run, d in zip(np.split(old, breaks), np.split(dist, breaks)):
+            if self._tied(run, new, recent_loops):
+                continue
+            picks.append((float(d.min()), int(run[np.argmin(d)])))
+        picks.sort()
+        chosen: list[int] = []
+        for _, a in picks:
+            if len(chosen) == o.max_candidates:
+                break
+            if self.window((float(sigma_t[a]), 0.0))[0] >= o.wide_window_m:
+                if path[new] - self._last_wide_m < o.wide_spacing_m:
+                    continue
+                self._last_wide_m = float(path[new])
+            chosen.append(a)
+        return chosen
+
+    def _tied(self, run: np.ndarray, new: int, loops: list[tuple[int, int]]) -> bool:
+        """True if an accepted loop from the last ``loop_spacing_m`` of path already lands in (or next to) ``run``."""
+        o = self.options
+        path = self.path_m
+        lo, hi = path[int(run[0])] - o.search_radius_m, path[int(run[-1])] + o.search_radius_m
+        return any(path[new] - path[b] < o.loop_spacing_m and lo <= path[a] <= hi for a, b in loops)
+
+    # -- matching --------------------------------------------------------------------------------
+
+    def _old_map(self, old: int, poses: np.ndarray) -> _OldMap:
+        cached = self._cache.get(old)
+        if cached is not None:
+            self._cache.move_to_end(old)
+            return cached
+        o = self.options
+        keyframes = self._old_range(old)
+        points = self._moved(keyframes, poses, poses[old])
+        built = _OldMap(CorrelativeReference.from_points(points, o.resolution_m),
+                        NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes))
+        self._cache[old] = built
+        if len(self._cache) > o.cache_size:
+            self._cache.popitem(last=False)
+        return built
+
+    def window(self, sigma: tuple[float, float]) -> np.ndarray:
+        """Search half-widths (m, m, rad) for an estimate of uncertainty ``sigma`` (m, rad)."""
+        o = self.options
+        half_m = min(max(o.gate_sigmas * sigma[0], o.min_window_m), o.search_radius_m)
+        return np.array([half_m, half_m, min(max(o.gate_sigmas * sigma[1], o.min_window_rad), math.pi)])
+
+    def angular_step(self, reach_m: float) -> float:
+        """Rotation step of the search (rad): a point ``reach_m`` from the keyframe moves by one raster cell."""
+        return self.options.resolution_m / max(reach_m, self.options.resolution_m)
+
+    def _old_range(self, old: int) -> range:
+        """The keyframes of the old map around ``old``."""
+        k = self.options.old_map_keyframes
+        return range(max(0, old - k), min(len(self.points), old + k + 1))
+
+    def _new_range(self, new: int) -> range:
+        """The keyframes of the new map: ``new`` and the ones before it."""
+        return range(max(0, new - self.options.new_map_keyframes), new + 1)
+
+    def _new_map(self, new: int, poses: np.ndarray) -> np.ndarray:
+        o = self.options
+        points = self._moved(self._new_range(new), poses, poses[new])
+        voxel = o.resolution_m
+        thinned = voxel_subsample(points, voxel)
+        while len(thinned) > o.max_points:
+            voxel *= 1.5
+            thinned = voxel_subsample(points, voxel)
+        return thinned
+
+    def _moved(self, keyframes: range, poses: np.ndarray, frame_pose: np.ndarray) -> np.ndarray:
+        """The points of ``keyframes`` moved into the frame of the pose ``frame_pose`` (estimate), stacked (M,2)."""
+        out = []
+        for k in keyframes:
+            T = se2_between(frame_pose, poses[k])
+            c, s = math.cos(T[2]), math.sin(T[2])
+            out.append(self.points[k] @ np.array([[c, s], [-s, c]]) + T[:2])
+        return np.vstack(out) if out else np.zeros((0, 2))
+
+    def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
+        """Match keyframe ``new`` against the old map around ``old`` from the estimate ``poses``; the record.
+
+        ``sigma``: the estimate's uncertainty of their relative pose (m, rad).
+        """
+        o = self.options
+        t0 = time.perf_counter()
+        guess = se2_between(poses[old], poses[new])
+        window = self.window(sigma)
+        cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])))
+        old_map = self._old_map(old, poses)
+        current = self._new_map(new, poses)
+        reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
+        grid = match_scans_grid(current, old_map.correlative, initial_pose=guess, search_range=window,
+                                angular_resolution_rad=self.angular_step(reach), min_score=o.min_score)
+        if not grid.ok:
+            cand.status = TOO_FEW_POINTS if "too few" in grid.reason else LOW_SCORE
+            cand.time_s = time.perf_counter() - t0
+            return cand
+        ndt = match_scans(current, old_map.ndt, initial_pose=grid.pose, max_iterations=50)
+        moved = se2_between(grid.pose, ndt.pose)
+        cand.score = float(grid.score)
+        if ndt.score <= 0 or np.hypot(moved[0], moved[1]) > o.max_refine_m or abs(moved[2]) > o.max_refine_rad:
+            cand.status = REFINE_FAILED
+        else:
+            cand.T_old_new = ndt.pose
+            cand.covariance = loop_covariance(grid, ndt.hessian, ndt.pose, old_map.covariance,
+                                              self.map_covariance(new, self._new_range(new)))
+        cand.time_s = time.perf_counter() - t0
+        return cand
+
+
+class ConsistencyCheck:
+    """Accepts loop matches that agree with the estimate and, when it is unsure, with each other.
+
+    ``path_m``: the keyframes' distances along the path (shared with
+    :class:`LoopClosureSearch`, growing as keyframes arrive).
+    """
+
+    def __init__(self, options: LoopOptions, path_m: list[float]) -> None:
+        self.options = options
+        self.path_m = path_m
+        self.pending: list[LoopCandidate] = []
+        self.accepted: list[LoopCandidate] = []
+
+    def gate(self, sigma: tuple[float, float]) -> tuple[float, float]:
+        """Largest disagreement (m, rad) with an estimate of uncertainty ``sigma`` that passes."""
+        o = self.options
+        return (o.gate_sigmas * sigma[0] + 2 * o.resolution_m,
+                o.gate_sigmas * sigma[1] + 2 * o.resolution_m / o.angular_reach_m)
+
+    def review(self, cand: LoopCandidate, poses: np.ndarray) -> list[LoopCandidate]:
+        """Judge a matched candidate against the estimate ``poses``; returns the candidates accepted now."""
+        o = self.options
+        residual = se2_between(cand.guess, cand.T_old_new)
+        gate_t, gate_r = self.gate(cand.sigma)
+        if np.hypot(residual[0], residual[1]) > gate_t or abs(residual[2]) > gate_r:
+            cand.status = INCONSISTENT
+            return []
+        if cand.sigma[0] <= o.sure_sigma_m:
+            cand.status = ACCEPTED
+            self.accepted.append(cand)
+            return [cand]
+        partners = [p for p in self.pending + self.accepted[-20:] if self._pair_consistent(cand, p, poses)]
+        if not partners:
+            cand.status = PENDING
+            self.pending.append(cand)
+            return []
+        now = [cand] + [p for p in partners if p.status == PENDING]
+        for c in now:
+            c.status = ACCEPTED
+            self.accepted.append(c)
+        self.pending = [p for p in self.pending if p.status == PENDING]
+        return now
+
+    def _pair_consistent(self, a: LoopCandidate, b: LoopCandidate, poses: np.ndarray) -> bool:
+        """Does the cycle a.old -> a.new -> b.new -> b.old -> a.old close within the gate?"""
+        o = self.options
+        path = self.path_m
+        if a.new == b.new:
+            return False
+        old_gap = abs(path[a.old] - path[b.old])
+        new_gap = abs(path[a.new] - path[b.new])
+        if old_gap > o.pair_max_path_m or new_gap > o.pair_max_path_m:
+            return False
+        # T_aold_anew should equal T_aold_bold (old chain) + T_bold_bnew (loop b) + T_bnew_anew (new chain).
+        through_b = se2_compose(se2_compose(se2_between(poses[a.old], poses[b.old]), b.T_old_new),
+                                se2_between(poses[b.new], poses[a.new]))
+        cycle = se2_between(a.T_old_new, through_b)
+        chain_m = old_gap + new_gap
+        sigma_t = math.sqrt(2.0) * o.resolution_m + o.drift_per_m * chain_m
+        sigma_r = math.sqrt(2.0) * o.resolution_m / o.angular_reach_m + o.drift_rad_per_m * chain_m
+        return bool(np.hypot(cycle[0], cycle[1]) <= o.gate_sigmas * sigma_t
+                    and abs(wrap_to_pi(cycle[2])) <= o.gate_sigmas * sigma_r)
+
+    def expire(self, newest: int) -> list[LoopCandidate]:
+        """Reject pending matches older than ``pending_keyframes`` keyframes before ``newest``; returns them."""
+        old = [p for p in self.pending if newest - p.new > self.options.pending_keyframes]
+        for p in old:
+            p.status = UNCONFIRMED
+        self.pending = [p for p in self.pending if p.status == PENDING]
+        return old
+
+    def flush(self) -> list[LoopCandidate]:
+        """At the end of the run: every match still pending is unconfirmed."""
+        return self.expire(newest=10**12)

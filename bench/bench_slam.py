@@ -1,0 +1,73 @@
+"""``bagtools slam``: speed of the whole run against the bag's own duration, and accuracy against the front end.
+
+Speed: seconds of recording processed per second of the whole command (front
+end, loop closure, GTSAM, the map, the errors, writing every output) on the
+real CSAIL log with and without its odometry (396 s of data, 406 scans of 361
+beams) when ``../shared/data/real`` is there, else on a simulated figure eight.
+Target: at least 10 (the run takes at most a tenth of the bag's duration, one
+core). Baseline in the same run: the front end alone on the same bag, so the
+ratio is what loop closure, the graph and the map add.
+
+Accuracy: APE after an SE(2) alignment of the optimized trajectory on a long
+simulated figure eight with high wheel-odometry noise (target 2 cm), against
+the front end's.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+from bagtools.slam import SlamOptions, SlamPipeline, laser_odometry, write_slam
+from bench.common import Row
+from simulate.pipeline import SimConfig, simulate_bag
+
+REAL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+
+
+def _whole_run_s(bag: Path, options: SlamOptions, out: Path) -> tuple[float, dict]:
+    t0 = time.perf_counter()
+    result = SlamPipeline(bag, options).run()
+    write_slam(result, out, force=True)
+    return time.perf_counter() - t0, result.summary
+
+
+def _front_end_s(bag: Path, options: SlamOptions) -> float:
+    t0 = time.perf_counter()
+    laser_odometry(bag, options)
+    return time.perf_counter() - t0
+
+
+def _duration_s(bag: Path) -> float:
+    from bagtools.io import open_bag
+
+    with open_bag(bag) as reader:
+        stamps = [rec.log_time_ns for rec in reader.messages(["/scan"])]
+    return (stamps[-1] - stamps[0]) / 1e9
+
+
+def run(quick: bool) -> list[Row]:
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory(prefix="bench_slam_") as tmp:
+        sim = Path(tmp) / "figure8"
+        simulate_bag(sim, SimConfig(duration_s=120.0 if quick else 600.0, route="figure8", odom_noise="high",
+                                    cloud=False, seed=3))
+        cases = [("simulated figure eight, high odometry noise", sim, SlamOptions())]
+        if REAL_DIR.is_dir() and not quick:
+            cases = [("CSAIL log with odometry", REAL_DIR / "csail_odom", SlamOptions()),
+                     ("CSAIL log, scans only", REAL_DIR / "csail_scans", SlamOptions(use_odometry=False)),
+                     *cases]
+        for label, bag, options in cases:
+            duration = _duration_s(bag)
+            whole_s, summary = _whole_run_s(bag, options, Path(tmp) / "out")
+            front_s = _front_end_s(bag, options)
+            rows.append(Row("slam", f"bag seconds per second, whole run: {label} ({duration:.0f} s, "
+                                    f"{summary['scans']} scans, {summary['loop_closure']['accepted']} loops)",
+                            duration / whole_s, "x real time", "front end alone", duration / front_s, True,
+                            ">= 10 (a tenth of the bag's duration)"))
+            if "errors_slam" in summary and bag == sim:
+                rows.append(Row("slam", f"APE after SE(2) alignment, {label} ({duration:.0f} s)",
+                                summary["errors_slam"]["ape_aligned_m"]["rmse"], "m", "front end alone",
+                                summary["errors_front_end"]["ape_aligned_m"]["rmse"], False, "<= 0.02 m"))
+    return rows

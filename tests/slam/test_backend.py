@@ -1,0 +1,51 @@
+"""Building the pose graph from front-end steps: edges, gaps in the chain, bad covariances, trajectories."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from bagtools.ndtodom.steps import FrontEndRun
+from bagtools.slam import BackEndOptions, build_pose_graph
+from bagtools.slam.backend import UNLINKED_COVARIANCE
+from bagtools.slam.graph import ODOMETRY
+from bagtools.transforms import se2_between
+
+
+def test_nodes_are_keyframes_and_edges_their_matches(figure8_front: FrontEndRun) -> None:
+    back = build_pose_graph(figure8_front.steps, BackEndOptions(loop=None))
+    assert list(back.keyframe_steps) == figure8_front.keyframe_indexes
+    odometry = [c for c in back.graph.constraints if c.kind == ODOMETRY]
+    assert len(odometry) == back.graph.n_nodes - 1
+    for c in odometry:
+        step = figure8_front.steps[int(back.keyframe_steps[c.j])]
+        assert back.keyframe_steps[c.i] == step.reference and np.allclose(c.T_i_j, step.T_ref_cur)
+        assert np.allclose(c.covariance, step.covariance)
+    assert len(back.optimizations) == 1 and back.optimizations[0].final_error < 1e-6
+
+
+def test_unlinked_keyframes_and_bad_covariances_are_counted(figure8_front: FrontEndRun) -> None:
+    steps = list(figure8_front.steps)
+    keys = figure8_front.keyframe_indexes
+    cut, bad = keys[10], keys[20]
+    steps[cut] = dataclasses.replace(steps[cut], reference=-1, covariance=np.full((3, 3), np.nan))
+    steps[bad] = dataclasses.replace(steps[bad], covariance=np.diag([1e-4, -1e-6, 1e-5]))
+    back = build_pose_graph(steps, BackEndOptions(loop=None))
+    assert back.counts["unlinked keyframes"] == 1 and back.counts["odometry covariances repaired"] == 1
+    assert len(back.warnings) == 2 and "no match against the keyframe before" in back.warnings[0]
+    gap = next(c for c in back.graph.constraints if c.j == 10)
+    assert gap.i == 9 and np.allclose(gap.covariance, UNLINKED_COVARIANCE)
+    assert np.allclose(gap.T_i_j, se2_between(steps[keys[9]].pose, steps[cut].pose))
+    assert np.isfinite(back.graph.poses).all()
+    assert np.allclose(back.graph.poses, figure8_front.poses()[keys], atol=1e-4)  # the chain itself is unchanged
+
+
+def test_loops_tie_the_graph_and_are_recorded(figure8_front: FrontEndRun) -> None:
+    back = build_pose_graph(figure8_front.steps)
+    accepted = [c for c in back.candidates if c.status == "accepted"]
+    assert len(accepted) == len(back.graph.loop_indexes()) > 10
+    for c in back.candidates:
+        d = c.as_dict()
+        assert d["status"] == c.status and d["old"] < d["new"] and d["time_ms"] >= 0
+    assert all(c.T_old_new is not None and np.isfinite(c.covariance).all() for c in accepted)

@@ -1,0 +1,131 @@
+"""Loop-closure search: candidates within reach, matches against local maps, the consistency checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bagtools.slam.constraints import (
+    ACCEPTED, INCONSISTENT, PENDING, UNCONFIRMED, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
+    voxel_subsample,
+)
+from bagtools.transforms import se2_between, se2_compose
+from tests.slam.standin import true_poses_at_scans
+
+
+def _search_over(front, poses_of_keyframes: np.ndarray, options: LoopOptions | None = None) -> LoopClosureSearch:
+    search = LoopClosureSearch(options)
+    keyframes = front.keyframe_indexes
+    for n, k in enumerate(keyframes):
+        motion = None if n == 0 else se2_between(poses_of_keyframes[n - 1], poses_of_keyframes[n])
+        search.add_keyframe(front.steps[k].points_base, motion)
+    return search
+
+
+def test_voxel_subsample_keeps_one_point_per_cell() -> None:
+    pts = np.array([[0.01, 0.01], [0.02, 0.03], [0.5, 0.5], [0.51, 0.52], [-0.3, 0.2]])
+    out = voxel_subsample(pts, 0.1)
+    assert len(out) == 3 and np.allclose(out, [[0.01, 0.01], [0.5, 0.5], [-0.3, 0.2]])
+    assert voxel_subsample(np.zeros((0, 2)), 0.1).shape == (0, 2)
+
+
+def test_candidates_skip_the_recent_path_and_take_the_nearest_of_each_pass(figure8_bag, figure8_front) -> None:
+    _, truth = true_poses_at_scans(figure8_bag)
+    kf = np.array(figure8_front.keyframe_indexes)
+    poses = truth[kf]
+    search = _search_over(figure8_front, poses, LoopOptions(max_candidates=10))
+    path = np.asarray(search.path_m)
+    new = len(kf) - 1
+    distance = path[new] - path  # along the chain only, as before any loop
+    found = search.candidates(new, poses, distance, [])
+    assert found, "the figure eight comes back to places it has seen"
+    for a in found:
+        assert path[new] - path[a] >= 5.0
+        reach = 5.0 + 3.0 * 0.03 * distance[a]
+        assert np.hypot(*(poses[a, :2] - poses[new, :2])) <= reach
+    assert len(found) == len(set(found)) and all(np.diff(sorted(found)) > 1)  # one per pass
+    # an accepted loop from the newest keyframe ties the pass it landed in
+    assert found[0] not in search.candidates(new, poses, distance, [(found[0], new)])
+
+
+def _drifted(poses: np.ndarray, new: int, error: list[float]) -> np.ndarray:
+    """``poses`` with the recent keyframes (``new`` and the 3 before) moved together so that ``new`` is off by ``error``."""
+    out = poses.copy()
+    moved = se2_compose(poses[new], error)
+    D = se2_compose(moved, se2_between(poses[new], np.zeros(3)))  # moved @ inv(poses[new])
+    for k in range(new - 3, new + 1):
+        out[k] = se2_compose(D, poses[k])
+    return out
+
+
+def test_match_recovers_the_true_relative_pose_from_a_wrong_guess(figure8_bag, figure8_front) -> None:
+    _, truth = true_poses_at_scans(figure8_bag)
+    kf = np.array(figure8_front.keyframe_indexes)
+    poses = truth[kf]
+    search = _search_over(figure8_front, poses)
+    new = len(kf) - 1
+    old = search.candidates(new, poses, np.asarray(search.path_m[new]) - np.asarray(search.path_m), [])[0]
+    cand = search.match(old, new, _drifted(poses, new, [0.25, -0.2, 0.08]), (0.15, 0.05))
+    truth_rel = se2_between(poses[old], poses[new])
+    err = se2_between(truth_rel, cand.T_old_new)
+    assert cand.score >= 0.5 and np.hypot(err[0], err[1]) < 0.02 and abs(err[2]) < 0.01, (cand.score, err)
+    assert np.allclose(cand.window[:2], 0.45) and np.isclose(cand.window[2], 0.15)
+    sd = np.sqrt(np.diag(cand.covariance))
+    assert (sd >= [0.01, 0.01, 0.005]).all() and (sd < [0.1, 0.1, 0.05]).all()
+    # a window that cannot reach the truth finds nothing good enough
+    missed = search.match(old, new, _drifted(poses, new, [1.5, 1.0, 0.0]), (0.01, 0.01))
+    assert missed.T_old_new is None or np.hypot(*se2_between(truth_rel, missed.T_old_new)[:2]) > 0.2
+
+
+def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
+    return LoopCandidate(old, new, guess, np.array([1.0, 1.0, 0.3]), sigma, T, np.eye(3) * 1e-4, 0.8)
+
+
+def test_consistency_check() -> None:
+    # A straight corridor: keyframes 1 m apart along x, poses exact; old keyframes 0..9, new ones 20..29 on top.
+    poses = np.zeros((30, 3))
+    poses[:10, 0] = np.arange(10)
+    poses[20:, 0] = np.arange(10)
+    path = list(np.arange(30, dtype=float) * 1.0)
+    check = ConsistencyCheck(LoopOptions(), path)
+    same = np.zeros(3)
+    sure = _cand(2, 22, same, same, (0.05, 0.01))
+    assert check.review(sure, poses) == [sure] and sure.status == ACCEPTED
+    off = _cand(3, 23, np.array([1.0, 0.0, 0.0]), same, (0.05, 0.01))  # 1 m off a sure estimate
+    assert check.review(off, poses) == [] and off.status == INCONSISTENT
+    # unsure estimate: one match waits, a second consistent one from another keyframe confirms both
+    check = ConsistencyCheck(LoopOptions(), path)
+    first = _cand(4, 24, same, same, (0.6, 0.1))
+    assert check.review(first, poses) == [] and first.status == PENDING
+    aliased = _cand(5, 25, np.array([0.9, 0.0, 0.0]), same, (0.6, 0.1))  # a look-alike 0.9 m further on
+    assert check.review(aliased, poses) == [] and aliased.status == PENDING
+    second = _cand(6, 26, same, same, (0.6, 0.1))
+    assert set(map(id, check.review(second, poses))) == {id(second), id(first)}
+    assert aliased.status == PENDING and check.expire(newest=40) == [aliased] and aliased.status == UNCONFIRMED
+
+
+@pytest.mark.parametrize("field,value", [("search_radius_m", 0.0), ("min_score", 1.5), ("max_candidates", 0),
+                                         ("old_map_keyframes", -1), ("drift_per_m", float("nan"))])
+def test_bad_loop_options(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        LoopOptions(**{field: value})
+
+
+def test_map_covariance_matches_a_monte_carlo_of_the_chain() -> None:
+    rng = np.random.default_rng(4)
+    search = LoopClosureSearch()
+    motions = [None, np.array([0.5, 0.0, 0.2]), np.array([0.5, 0.1, -0.1]), np.array([0.4, 0.0, 0.3])]
+    cov = np.diag([1e-4, 4e-4, 1e-4])
+    for m in motions:
+        search.add_keyframe(np.zeros((0, 2)), m, None if m is None else cov)
+    predicted = search.map_covariance(1, range(0, 4))
+    samples = []
+    for _ in range(2000):
+        noisy = [m + rng.multivariate_normal(np.zeros(3), cov) for m in motions[1:]]
+        before = se2_between(noisy[0], np.zeros(3))  # keyframe 0 in keyframe 1's frame
+        after1 = noisy[1]
+        after2 = se2_compose(noisy[1], noisy[2])
+        samples.append([before, after1, after2])
+    samples = np.array(samples)  # (draws, keyframe, 3)
+    empirical = sum(np.cov(samples[:, k].T) for k in range(3)) / 4
+    assert np.allclose(predicted, empirical, rtol=0.2, atol=2e-6), (predicted, empirical)
