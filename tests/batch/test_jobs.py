@@ -174,3 +174,22 @@ def test_outputs_without_a_marker_are_not_overwritten_without_force(fleet: Fleet
     assert again["status"] == FAILED and "already exists (use --force to overwrite)" in again["error"]
     assert read_marker(task.bag_dir) is None
     assert run_task(replace(task, force=True))["status"] == OK and read_marker(task.bag_dir) is not None
+
+
+def test_the_message_count_reads_the_summary_and_falls_back_to_the_reader(fleet: Fleet, tmp_path: Path) -> None:
+    from bagtools.batch.task import message_count
+    from bagtools.errors import BagError
+    from bagtools.io import open_bag
+
+    bag = fleet.good[2]
+    with open_bag(bag) as reader:
+        full = reader.message_count
+    assert message_count(str(bag)) == full
+    storage = next(bag.glob("*.mcap"))
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(storage.read_bytes()[: storage.stat().st_size // 2])  # no summary: the reader recovers what it can
+    with open_bag(cut) as reader:
+        recovered = reader.message_count
+    assert 0 < message_count(str(cut)) == recovered < full
+    with pytest.raises(BagError, match="truncated MCAP"):
+        message_count(str(fleet.corrupt))
