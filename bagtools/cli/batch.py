@@ -8,6 +8,7 @@ import click
 
 _COMMAND_ARGS = "bagtools.batch.command_args"
 _OUT_PLACEHOLDER = "<batch --out>"
+_MAX_FAILURES_SHOWN = 20
 
 
 class _BatchCommand(click.Command):
@@ -98,9 +99,11 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     written = write_fleet(plan.out_dir, rows, plan.job,
                           title=f"bagtools batch {command}: {counts['ok']} ok, {counts[SKIPPED]} skipped, "
                                 f"{counts[FAILED]} failed of {len(rows)} bags")
-    for row in rows:
-        if row["status"] == FAILED:
-            click.echo(f"bagtools: {row['bag']}: failed: {row['error']}", err=True)
+    failed = [row for row in rows if row["status"] == FAILED]
+    for row in failed[:_MAX_FAILURES_SHOWN]:
+        click.echo(f"bagtools: {row['bag']}: failed: {row['error']}", err=True)
+    if len(failed) > _MAX_FAILURES_SHOWN:
+        click.echo(f"bagtools: ... and {len(failed) - _MAX_FAILURES_SHOWN} more failed bags (see fleet.csv)", err=True)
     click.echo(f"{len(rows)} bags: {counts['ok']} ok, {counts[SKIPPED]} skipped (done before), {counts[FAILED]} failed "
                f"in {elapsed:.1f} s; wrote {', '.join(p.name for p in written)} in {out_dir}")
     if counts[FAILED]:
