@@ -63,10 +63,10 @@ def test_map_cloud_results_put_each_cloud_on_the_map(tmp_path: Path) -> None:
     (_, cloud_map), = msgs["/cloud_map"]
     assert cloud_map.header.frame_id == "map"
     dynamic, static = _tf_tables(msgs)
-    assert static["camera_rgb_optical_frame"][0] == "base_footprint"
+    assert static["camera_depth_optical_frame"][0] == "base_footprint"
     landed = []
     for _, cloud in msgs["/camera/depth/points"]:
-        assert cloud.header.frame_id == "camera_rgb_optical_frame"
+        assert cloud.header.frame_id == "camera_depth_optical_frame"
         T = _chain("map", cloud.header.frame_id, _ns(cloud.header.stamp), dynamic, static)
         landed.append(_cloud_xyz(cloud) @ T[:3, :3].T + T[:3, 3])
     landed = np.concatenate(landed)

@@ -57,6 +57,8 @@ OWN_OUTPUTS = {
     "ndt-odom": ("trajectory.tum", "odometry.tum", "ground_truth.tum", "trajectory.png", "scan_map.png", "summary.json",
                  "results.mcap"),
     "grid": ("map.pgm", "map.yaml", "map.png", "summary.json", "results.mcap"),
+    "slam": ("trajectory.tum", "odometry.tum", "ground_truth.tum", "pose_graph.g2o", "map.pgm", "map.yaml", "map.png",
+             "summary.json", "results.mcap"),
 }
 USER_FILES: dict[str, bytes | None] = {
     "notes.txt": b"my notes about this run: keep them\n",
@@ -67,7 +69,7 @@ EARLIER_OUTPUT = b"output of an earlier good run\n"
 FIXED_MTIME_NS = 1_600_000_000 * S
 
 EXPECTATIONS = ("error", "warn_or_error", "ok", "any")
-ALL_COMMANDS = ("info", "tf frames", "tf echo", "tf point", "map-cloud", "ndt-odom", "grid")
+ALL_COMMANDS = ("info", "tf frames", "tf echo", "tf point", "map-cloud", "ndt-odom", "grid", "slam")
 
 
 @dataclass
@@ -154,7 +156,7 @@ class Profile:
     def supports(self, command: str) -> bool:
         if command in ("map-cloud",):
             return self.cloud_topic is not None or self.scan_topic is not None
-        if command in ("map-cloud scan", "ndt-odom", "grid"):
+        if command in ("map-cloud scan", "ndt-odom", "grid", "slam"):
             return self.scan_topic is not None
         if command == "grid gt":
             return self.scan_topic is not None and self.ground_truth
@@ -268,8 +270,8 @@ class _Builder:
                 argv += ["--topic", prof.cloud_topic]
             if prof.sample:
                 argv += ["--sample", prof.sample]
-        elif command == "ndt-odom":
-            argv = ["ndt-odom", bag, "--out", str(out), "--force"]
+        elif command in ("ndt-odom", "slam"):
+            argv = [command, bag, "--out", str(out), "--force"]
             if prof.scan_topic != "/scan":
                 argv += ["--topic", str(prof.scan_topic)]
         elif command.startswith("grid"):
@@ -846,7 +848,7 @@ def _ros1_cases(B: _Builder) -> None:
 # ---------------------------------------------------------------------------- message content
 
 
-SCAN_CMDS = ("map-cloud scan", "ndt-odom", "grid")
+SCAN_CMDS = ("map-cloud scan", "ndt-odom", "grid", "slam")
 TF_VALUE_CMDS = ("tf echo", "tf point", "map-cloud", "ndt-odom", "grid")
 
 
