@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "grid": "bagtools.cli.grid:grid",
     "slam": "bagtools.cli.slam:slam",
     "export": "bagtools.cli.export:export",
+    "batch": "bagtools.cli.batch:batch",
 }
 
 
@@ -113,7 +114,8 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run(args: list[str]) -> int:
     try:
-        cli.main(args=args, prog_name="bagtools", standalone_mode=False)
+        # Without standalone mode click returns (not raises) the status of ctx.exit(n), e.g. batch's 1.
+        status = cli.main(args=args, prog_name="bagtools", standalone_mode=False)
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except click.UsageError as exc:
@@ -153,4 +155,4 @@ def _run(args: list[str]) -> int:
         click.echo(f"bagtools: {_input_name(args)}: internal error ({type(exc).__name__}: {detail}); "
                    "please report it with BAGTOOLS_DEBUG=1 set for the traceback", err=True)
         return 2
-    return 0
+    return status if isinstance(status, int) else 0

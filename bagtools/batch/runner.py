@@ -1,0 +1,244 @@
+"""Running a batch on Dask (``dask.distributed``): an embedded LocalCluster, or an existing cluster.
+
+Embedded (the default): a ``distributed.LocalCluster`` of one single-threaded
+worker process per core (``threads_per_worker=1``; Dask's nannies set
+OMP_NUM_THREADS=1 and friends in each worker), started and stopped here. With
+a scheduler address the same tasks go to an existing cluster (``dask
+scheduler`` / ``dask worker``, dask-jobqueue, dask-kubernetes); its workers
+must import the same bagtools and see the bags and the output directory at
+the same paths, which :meth:`BatchRun.run` checks on every worker first.
+
+Each bag is one task, :func:`bagtools.batch.task.run_task`, largest bag first
+(the long ones do not end up last, alone). A problem with a bag is a row, not
+an exception; a worker that dies mid-task (killed, out of memory) has its task
+run again on another worker by the scheduler, up to Dask's
+``distributed.scheduler.allowed-failures`` times, after which the bag is a
+failed row. ``retries`` covers the rest of Dask's own failures (a task that
+could not be sent or unpacked).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import uuid
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bagtools.batch.plan import BatchPlan, claim_out_dir, row_columns
+from bagtools.batch.task import (
+    FAILED, SKIPPED, BagTask, completed_row, new_row, one_line, read_marker, run_task,
+)
+from bagtools.errors import BagtoolsError
+from bagtools.progress import progress_bar
+
+#: Times a task is resubmitted after a Dask failure that is not the bag's (the bag's own errors are rows).
+TASK_RETRIES = 2
+
+
+@dataclass(frozen=True)
+class ClusterSpec:
+    """Where to run: ``scheduler`` (an address like tcp://host:8786) or an embedded cluster of ``workers`` processes.
+
+    ``workers`` None: one per core this process may use.
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+
+    def local_workers(self) -> int:
+        """Worker processes of the embedded cluster."""
+        if self.workers is not None:
+            return self.workers
+        try:
+            return len(os.sched_getaffinity(0))
+        except AttributeError:  # not Linux
+            return os.cpu_count() or 1
+
+
+def _bag_bytes(bag: str) -> int:
+    """Size of a bag on disk (all files of a rosbag2 directory), bytes; 0 when unreadable."""
+    path = Path(bag)
+    try:
+        if path.is_dir():
+            return sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+def _worker_ready(command: str, version: str, paths: list[str]) -> str | None:
+    """On each worker: None when it can run this batch, else what is wrong (imports the command's modules once)."""
+    import bagtools
+    from bagtools.batch.jobs import JOBS
+
+    if bagtools.__version__ != version:
+        return f"has bagtools {bagtools.__version__}, this command is {version}"
+    missing = [p for p in paths if not os.path.exists(p)]
+    if missing:
+        return f"cannot see {missing[0]}"
+    JOBS[command]  # noqa: B018 - the registry imports nothing heavy; the first task does, once per worker
+    return None
+
+
+def _scheduler_has_dashboard() -> bool:
+    return importlib.util.find_spec("bokeh") is not None
+
+
+class BatchRun:
+    """Run a :class:`BatchPlan` on Dask and collect one row per bag.
+
+    ``notify`` receives one-line messages for the user (the cluster, the
+    dashboard address). :attr:`rows` fills in as bags finish, so after an
+    interruption it holds what was done.
+    """
+
+    def __init__(self, plan: BatchPlan, cluster: ClusterSpec, notify: Callable[[str], None] = lambda text: None) -> None:
+        self.plan = plan
+        self.cluster = cluster
+        self.notify = notify
+        self.rows: dict[str, dict] = dict(plan.decided)
+
+    def run(self) -> list[dict]:
+        """Run every task; return the rows in bag order. KeyboardInterrupt cancels what is left and re-raises."""
+        if self.plan.tasks:
+            with self._client() as client:
+                self._check_workers(client)
+                claim_out_dir(self.plan.out_dir, self.plan.command)
+                futures = self._submit(client)
+                try:
+                    self._collect(futures)
+                except BaseException:
+                    client.cancel(futures, force=True)
+                    raise
+        return self.plan.ordered(self.rows)
+
+    def done_count(self) -> int:
+        """Bags of this run's tasks whose outputs are complete now (e.g. after an interruption)."""
+        return sum(completed_row(t, read_marker(t.bag_dir)) is not None for t in self.plan.tasks)
+
+    # -- the cluster ------------------------------------------------------------
+
+    @contextmanager
+    def _client(self) -> Iterator[Any]:
+        from distributed import Client
+
+        if self.cluster.scheduler:
+            try:
+                client = Client(self.cluster.scheduler, timeout="20s")
+            except (OSError, TimeoutError, ValueError) as err:
+                raise BagtoolsError(f"cannot reach the Dask scheduler: {one_line(str(err), 200)}",
+                                    self.cluster.scheduler) from err
+            try:
+                if not client.nthreads():
+                    self.notify(f"waiting for a Dask worker to join {self.cluster.scheduler} ...")
+                    client.wait_for_workers(1)
+                n = len(client.nthreads())
+                self.notify(f"{len(self.plan.tasks)} bags to run on the Dask cluster at {self.cluster.scheduler} "
+                            f"({n} workers now)")
+                self._announce_dashboard(client, remote=True)
+                yield client
+            finally:
+                client.close()
+            return
+        from distributed import LocalCluster
+
+        import dask
+
+        n = min(self.cluster.local_workers(), len(self.plan.tasks))
+        bokeh = importlib.util.find_spec("bokeh") is not None
+        # Dask samples every task's stack for the dashboard's profile page: 5 % of a bag's time, so only with one.
+        with dask.config.set({"distributed.worker.profile.enabled": bokeh}), \
+                LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                             dashboard_address=":8787" if bokeh else ":0", preload=["bagtools.batch.worker"]) as cluster, \
+                Client(cluster) as client:
+            self.notify(f"{len(self.plan.tasks)} bags to run on {n} local worker process{'es' if n > 1 else ''}")
+            if bokeh:
+                self._announce_dashboard(client, remote=False)
+            yield client
+
+    def _announce_dashboard(self, client: Any, remote: bool) -> None:
+        """Print the dashboard address when the scheduler serves one (it needs bokeh)."""
+        try:
+            if remote and not client.run_on_scheduler(_scheduler_has_dashboard):
+                return
+        except Exception:  # a scheduler that refuses to run code: say nothing
+            return
+        link = client.dashboard_link
+        if link:
+            self.notify(f"Dask dashboard: {link}")
+
+    def _check_workers(self, client: Any) -> None:
+        import bagtools
+
+        out = self.plan.out_dir  # it may not exist yet: its nearest existing folder must be visible
+        while not out.exists() and out.parent != out:
+            out = out.parent
+        paths = [self.plan.tasks[0].bag, str(out)]
+        try:
+            problems = client.run(_worker_ready, self.plan.command, bagtools.__version__, paths)
+        except Exception as err:  # e.g. a worker without bagtools cannot even unpack the check
+            raise BagtoolsError(f"the Dask workers cannot run bagtools ({type(err).__name__}: "
+                                f"{one_line(str(err), 200)}); they need the same Python environment",
+                                self.cluster.scheduler or "workers") from err
+        bad = {worker: why for worker, why in problems.items() if why}
+        if bad:
+            worker, why = next(iter(bad.items()))
+            raise BagtoolsError(f"Dask worker {worker} {why}: every worker needs the same bagtools and the bags and "
+                                f"--out at the same paths", self.cluster.scheduler or "workers")
+
+    # -- the tasks --------------------------------------------------------------
+
+    def _submit(self, client: Any) -> dict[Any, BagTask]:
+        """Submit every task, largest bag first; returns future -> task."""
+        batch_id = uuid.uuid4().hex[:8]
+        tasks = sorted(self.plan.tasks, key=lambda t: _bag_bytes(t.bag), reverse=True)
+        futures = {}
+        for rank, task in enumerate(tasks):
+            future = client.submit(run_task, task, key=f"bagtools-{task.command}-{task.name}-{batch_id}",
+                                   retries=TASK_RETRIES, priority=len(tasks) - rank, pure=False)
+            futures[future] = task
+        return futures
+
+    def _collect(self, futures: dict[Any, BagTask]) -> None:
+        from distributed import as_completed
+
+        columns = row_columns(self.plan.job)
+        skipped = sum(row["status"] == SKIPPED for row in self.rows.values())
+        with progress_bar(total=self.plan.total, desc=f"batch {self.plan.command}", unit="bag") as bar:
+            bar.update(len(self.rows))
+            for future in as_completed(list(futures)):
+                task = futures[future]
+                row = row_of_future(future, task)
+                self.rows[task.name] = {k: row.get(k) for k in columns}
+                bar.update(1)
+                failed = sum(r["status"] == FAILED for r in self.rows.values())
+                bar.set_postfix(failed=failed, skipped=skipped, refresh=False)
+
+
+def row_of_future(future: Any, task: BagTask) -> dict:
+    """The row of a finished Dask future of ``task``; a failure of Dask itself is a failed row.
+
+    The task never raises for its bag, so an error here is Dask's: the bag
+    killed every worker it ran on (``KilledWorker``), or something internal.
+    """
+    from distributed import KilledWorker
+
+    if future.status == "finished":
+        return future.result()
+    if future.status == "cancelled":
+        return new_row(task, FAILED, "internal error: Dask cancelled the task")
+    exc = future.exception()
+    if isinstance(exc, KilledWorker):
+        return new_row(task, FAILED, f"{task.bag}: the worker running it died each time it was tried "
+                                     "(killed, out of memory, or a crash in native code)")
+    return new_row(task, FAILED, one_line(f"internal error: {type(exc).__name__}: {exc}"))
+
+
+def run_batch(plan: BatchPlan, cluster: ClusterSpec, notify: Callable[[str], None] = lambda text: None) -> list[dict]:
+    """Run ``plan`` (see :class:`BatchRun`) and return one row per bag, in bag order."""
+    return BatchRun(plan, cluster, notify).run()

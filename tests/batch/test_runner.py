@@ -1,0 +1,47 @@
+"""Dask's own failures as rows, and the size of the embedded cluster (no cluster started here)."""
+
+from __future__ import annotations
+
+import os
+
+from distributed import KilledWorker
+
+from bagtools.batch.runner import ClusterSpec, row_of_future
+from bagtools.batch.task import FAILED, BagTask
+
+
+class _Future:
+    def __init__(self, status: str, result: object = None, exception: BaseException | None = None) -> None:
+        self.status, self._result, self._exception = status, result, exception
+
+    def result(self) -> object:
+        return self._result
+
+    def exception(self) -> BaseException | None:
+        return self._exception
+
+
+TASK = BagTask("grid", "/data/run1", "run1", "/out", None, {}, False)
+
+
+def test_a_finished_future_gives_the_tasks_row() -> None:
+    row = {"bag": "run1", "status": "ok"}
+    assert row_of_future(_Future("finished", row), TASK) is row
+
+
+def test_a_bag_that_killed_every_worker_is_a_failed_row_that_says_so() -> None:
+    row = row_of_future(_Future("error", exception=KilledWorker("bagtools-grid-run1-x", "tcp://w:1", 3)), TASK)
+    assert row["status"] == FAILED and row["bag"] == "run1"
+    assert row["error"] == ("/data/run1: the worker running it died each time it was tried (killed, out of memory, "
+                            "or a crash in native code)")
+
+
+def test_other_dask_failures_are_internal_errors_on_one_line() -> None:
+    row = row_of_future(_Future("error", exception=RuntimeError("lost\nconnection")), TASK)
+    assert row["status"] == FAILED and row["error"] == "internal error: RuntimeError: lost connection"
+    assert row_of_future(_Future("cancelled"), TASK)["error"] == "internal error: Dask cancelled the task"
+
+
+def test_the_embedded_cluster_has_one_worker_per_usable_core_unless_told() -> None:
+    assert ClusterSpec().local_workers() == len(os.sched_getaffinity(0))
+    assert ClusterSpec(workers=5).local_workers() == 5
