@@ -336,9 +336,13 @@ def check_claims(guide: str, workdir: Path, speed: dict | None) -> list[str]:
     chained = dict(re.findall(r"^(NDT|wheel odometry) +position error: end ([\d.]+) m", guide, re.M))
     claim(len(chained) == 2 and float(chained["NDT"]) < float(chained["wheel odometry"]),
           "5: chained scan to scan, NDT already ends closer to the truth than the wheels")
+    lags = re.search(r"^latest transform newer than the cloud by (.*)$", guide, re.M)
+    claim(lags is not None and all(float(ms) <= 34 for ms in re.findall(r"([\d.]+) ms", lags.group(1))),
+          "4: the latest transform is at most one 30 Hz odometry step newer than the cloud")
     ndt = summary("ndt")
     claim(ndt["errors_ndt"]["ape_translation_m"]["rmse"] < 0.25 * ndt["errors_odometry"]["ape_translation_m"]["rmse"],
           "5: the NDT trajectory lies on the ground truth, the wheels curl away")
+    claim("agrees with bagtools grid in 100.0% of its" in guide, "6: bagtools grid does the same as insert_ray by hand")
     grids = {n: summary(n)["accuracy_vs_truth"] for n in ("grid", "grid_truth", "grid_odom", "grid_ndt")}
     claim(grids["grid_odom"]["occupied_precision"] < grids["grid"]["occupied_precision"]
           < grids["grid_truth"]["occupied_precision"], "6: odom grid worse than tf grid, tf grid worse than the truth")
