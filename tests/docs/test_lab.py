@@ -20,6 +20,7 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -132,15 +133,27 @@ def test_what_the_guide_says_about_the_speed_experiment_holds() -> None:
 def test_the_simulator_settings_the_guide_quotes_are_the_simulators(guide: str) -> None:
     from bagtools.grid.occupancy import DEFAULT_INVERSE_MODEL, OccupancyGrid
     from simulate.pipeline import LATENCY_MS, ODOM_RATE_HZ, STEPS_PER_SCAN
-    from simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, UPDATE_MIN_A_RAD, UPDATE_MIN_D_M
-    from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS
+    from simulate.robot.amcl import (ESTIMATE_XY_SD_M, ESTIMATE_YAW_SD_RAD, TRANSFORM_TOLERANCE_NS, UPDATE_MIN_A_RAD,
+                                     UPDATE_MIN_D_M)
+    from simulate.robot.routes import make_route
+    from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS, STATIC_TRANSFORMS
     from simulate.sensors import Lidar
+    from simulate.world import load_world
+
+    prose = " ".join(guide.split())
 
     assert (UPDATE_MIN_D_M, UPDATE_MIN_A_RAD, TRANSFORM_TOLERANCE_NS) == (0.2, 0.5, 1_000_000_000)
-    assert "0.2 m or turned 0.5 rad" in guide and "stamped 1 s ahead" in guide
+    assert "0.2 m or turned 0.5 rad" in prose and "stamped 1 s ahead" in prose
+    assert ESTIMATE_XY_SD_M == 0.03 and round(float(np.rad2deg(ESTIMATE_YAW_SD_RAD)), 6) == 1.0
+    assert "3 cm per axis in the simulator" in prose and "a few centimetres and about a degree" in prose
+    lap = make_route("lap", load_world("turtlebot3_world")).loop_xy
+    lap_m = np.sum(np.linalg.norm(np.diff(lap, axis=0, append=lap[:1]), axis=1))
+    assert "the lap is 12.6 m" in prose and f"{lap_m:.1f}" == "12.6"
+    base_link = next(st for st in STATIC_TRANSFORMS if (st.parent, st.child) == ("base_footprint", "base_link"))
+    assert tuple(base_link.xyz_m) == (0.0, 0.0, 0.010) and "`base_link` sits 1 cm above it" in prose
     assert Lidar().rate_hz == 5.0 and ODOM_RATE_HZ / STEPS_PER_SCAN == 5.0 and ODOM_RATE_HZ == 30
-    assert LATENCY_MS["cloud"] == (20, 60) and "20-60 ms latency" in guide
-    assert LATENCY_MS["scan"] == (10, 30) and "10-30 ms" in guide
+    assert LATENCY_MS["cloud"] == (20, 60) and "20-60 ms latency" in prose
+    assert LATENCY_MS["scan"] == (10, 30) and "10-30 ms" in prose
     assert (MAX_LINEAR_MPS, MAX_ANGULAR_RADPS) == (0.26, 1.82)
     grid = OccupancyGrid(1, 1, 20)
     assert DEFAULT_INVERSE_MODEL == (0.4, 0.7) and (grid.occupied_threshold, grid.free_threshold) == (0.65, 0.2)
