@@ -1,11 +1,12 @@
-# bagtools: `make demo` sets up and runs the main job; `make test` sets up and runs the tests.
+# bagtools: `make demo` sets up and runs the main job; `make test` sets up and runs the tests;
+# `make docs` regenerates the lab guide's outputs, figures and tables (docs/lab.md).
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 BAGTOOLS := $(VENV)/bin/bagtools
 OUT    ?= out
 
-.PHONY: setup sysdeps demo test bench fixtures clean
+.PHONY: setup sysdeps demo test docs bench fixtures clean
 
 # System library Open3D loads at import time (libusb-1.0). Installed with apt-get when
 # we may; otherwise the one command that does it is printed and setup stops.
@@ -40,6 +41,9 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+docs: setup
+	$(PY) docs/make_figures.py
 
 bench: setup
 	$(PY) -m pip install -q -e '.[test,bench]'
