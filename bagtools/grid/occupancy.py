@@ -310,13 +310,14 @@ class OccupancyGrid:
 
         Args:
             pose: sensor [x y theta] in the grid's world frame (metres, rad).
-            ranges: (N,) metres; NaN ignored, >= max_range (or inf) is a free beam up to max_range.
+            ranges: (N,) metres; NaN and -inf (REP 117: closer than the sensor's minimum) ignored,
+                >= max_range (or inf) is a free beam up to max_range.
             angles: (N,) beam angles in the sensor frame, rad.
             max_range: the sensor's maximum range, metres.
             inverse_model: [free occupied] observation probabilities.
 
         Raises:
-            ValueError: negative ranges, mismatched shapes, non-finite pose/angles/max_range.
+            ValueError: negative finite ranges, mismatched shapes, non-finite pose/angles/max_range.
         """
         pose = np.asarray(pose, dtype=np.float64).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
@@ -327,12 +328,12 @@ class OccupancyGrid:
             raise ValueError(f"ranges and angles differ in length: {ranges.size} vs {angles.size}")
         if not (np.isfinite(max_range) and max_range > 0):
             raise ValueError(f"max_range must be a positive number of metres, got {max_range}")
-        if np.any(ranges < 0):
-            raise ValueError(f"ranges must not be negative (min {np.nanmin(ranges)} m)")
+        if np.any((ranges < 0) & np.isfinite(ranges)):
+            raise ValueError(f"ranges must not be negative (min {np.nanmin(ranges[np.isfinite(ranges)])} m)")
         if not np.all(np.isfinite(angles)):
             raise ValueError("angles must be finite")
         l_free, l_occ = self._inverse_model_log_odds(inverse_model)
-        valid = ~np.isnan(ranges)
+        valid = ~np.isnan(ranges) & (ranges != -np.inf)
         if not valid.all():
             ranges, angles = ranges[valid], angles[valid]
         if ranges.size == 0:

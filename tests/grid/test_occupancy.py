@@ -264,3 +264,14 @@ def test_cropped_keeps_cells_in_place_and_drops_unknown_margin() -> None:
     rows, cols = np.nonzero(small.log_odds != 0)
     assert rows.min() == 3 and cols.min() == 3
     assert rows.max() == small.grid_size[0] - 4 and cols.max() == small.grid_size[1] - 4
+
+
+def test_minus_infinity_ranges_are_ignored_like_nan() -> None:
+    """REP 117: -inf means an object closer than range_min; it tells nothing about any cell."""
+    from bagtools.grid import OccupancyGrid
+
+    a, b = OccupancyGrid(4, 4, 20), OccupancyGrid(4, 4, 20)
+    angles = np.array([0.0, 0.5, 1.0])
+    a.insert_ray([1.0, 1.0, 0.0], np.array([1.0, -np.inf, 1.5]), angles, 3.0)
+    b.insert_ray([1.0, 1.0, 0.0], np.array([1.0, np.nan, 1.5]), angles, 3.0)
+    np.testing.assert_array_equal(a.occupancy_matrix(), b.occupancy_matrix())
