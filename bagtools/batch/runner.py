@@ -24,7 +24,7 @@ import logging
 import os
 import uuid
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ from bagtools.batch.plan import BatchPlan, claim_out_dir, row_columns
 from bagtools.batch.task import (
     FAILED, SKIPPED, BagTask, completed_row, new_row, one_line, read_marker, run_task,
 )
+from bagtools.batch.worker import sigint_ignored
 from bagtools.errors import BagtoolsError
 from bagtools.progress import progress_bar
 
@@ -151,11 +152,14 @@ class BatchRun:
 
         n = min(self.cluster.local_workers(), len(self.plan.tasks))
         bokeh = importlib.util.find_spec("bokeh") is not None
-        # Dask samples every task's stack for the dashboard's profile page: 5 % of a bag's time, so only with one.
-        with dask.config.set({"distributed.worker.profile.enabled": bokeh}), \
-                LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
-                             dashboard_address=":8787" if bokeh else ":0", preload=["bagtools.batch.worker"]) as cluster, \
-                Client(cluster) as client:
+        with ExitStack() as stack:
+            # Dask samples every task's stack for the dashboard's profile page: 5 % of a bag's time, so only with one.
+            stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": bokeh}))
+            with sigint_ignored():
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                    dashboard_address=":8787" if bokeh else ":0", preload=["bagtools.batch.worker"]))
+                client = stack.enter_context(Client(cluster))
             self.notify(f"{len(self.plan.tasks)} bags to run on {n} local worker process{'es' if n > 1 else ''}")
             if bokeh:
                 self._announce_dashboard(client, remote=False)

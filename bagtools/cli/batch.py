@@ -91,8 +91,10 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     except (KeyboardInterrupt, Terminated) as exc:
         finished = run.done_count()
         how = f"terminated by signal {exc.signum}" if isinstance(exc, Terminated) else "interrupted"
+        left = len(plan.tasks) - finished
         click.echo(f"bagtools: {how}: {finished} of {len(plan.tasks)} bags done, their outputs kept in {out_dir}; "
-                   f"run the same command again to do the other {len(plan.tasks) - finished}", err=True)
+                   + (f"run the same command again to do the other {left}" if left else
+                      "run the same command again to write the fleet table"), err=True)
         raise click.exceptions.Exit(128 + exc.signum if isinstance(exc, Terminated) else 130) from None
     elapsed = time.perf_counter() - t0
     counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", SKIPPED, FAILED)}
