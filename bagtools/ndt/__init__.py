@@ -10,14 +10,17 @@ matcher (MATLAB ``matchScansGrid``): correlative scan matching over a window
 around an initial pose, by branch and bound on max-pooled likelihood rasters;
 same pose convention, returns the best pose of the discretized window with a
 score and a covariance. Build a :class:`CorrelativeReference` once to match
-many scans against one reference or local map.
+many scans against one reference or local map. ``match_scans_grid_peaks`` returns
+the window's distinct good poses (for scenes that repeat), best first.
 """
 
-from bagtools.ndt.correlative import CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_ranges
+from bagtools.ndt.correlative import (
+    CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_peaks, match_scans_grid_ranges,
+)
 from bagtools.ndt.grid import NdtReference
 from bagtools.ndt.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
 
 __all__ = [
     "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult", "match_scans",
-    "match_scans_grid", "match_scans_grid_ranges", "match_scans_ranges", "ranges_to_points",
+    "match_scans_grid", "match_scans_grid_peaks", "match_scans_grid_ranges", "match_scans_ranges", "ranges_to_points",
 ]

@@ -373,6 +373,19 @@ _CHILD_DX = np.array([0, 0, 1, 1])
 _CHILD_DY = np.array([0, 1, 0, 1])
 
 
+def _roots(win: _Window) -> tuple[np.ndarray, np.ndarray]:
+    """The coarsest level's nodes (a node table: every angle x the 2^depth blocks covering the window), bounded."""
+    na, nx, ny = win.n
+    side = 1 << win.depth
+    cx, cy = np.arange(0, nx, side), np.arange(0, ny, side)
+    nodes = np.empty((_NODE_ROWS, na * len(cx) * len(cy)), dtype=np.int64)
+    nodes[0] = np.repeat(np.arange(na), len(cx) * len(cy))
+    nodes[1] = np.tile(np.repeat(cx, len(cy)), na)
+    nodes[2] = np.tile(cy, na * len(cx))
+    nodes[3] = nodes[1] * win.stride + nodes[2]
+    return nodes, _scores(win, nodes[0], nodes[3], win.depth)
+
+
 def _children(win: _Window, parents: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
     """The level-(``level`` - 1) children of level-``level`` nodes (a node table) and their scores."""
     half = 1 << (level - 1)
@@ -413,16 +426,8 @@ def _branch_and_bound(win: _Window, threshold: int, beam: int = 8, alpha: float 
     may hold a candidate that wins the tie. The result does not depend on
     ``beam``, ``alpha`` or ``min_batch``, only the work does.
     """
-    na, nx, ny = win.n
     top = win.depth
-    side = 1 << top
-    cx, cy = np.arange(0, nx, side), np.arange(0, ny, side)
-    nodes = np.empty((_NODE_ROWS, na * len(cx) * len(cy)), dtype=np.int64)
-    nodes[0] = np.repeat(np.arange(na), len(cx) * len(cy))
-    nodes[1] = np.tile(np.repeat(cx, len(cy)), na)
-    nodes[2] = np.tile(cy, na * len(cx))
-    nodes[3] = nodes[1] * win.stride + nodes[2]
-    bound = _scores(win, nodes[0], nodes[3], top)
+    nodes, bound = _roots(win)
     evaluated = bound.size
     incumbent: tuple[int, int, int] | None = None  # (score, -distance^2, -lin) of the best candidate so far
     if top == 0:  # a window of one cell in x and y: the roots are the candidates
@@ -553,6 +558,60 @@ def match_scans_grid(
             would need more than ``MAX_RASTER_CELLS`` raster cells or
             ``MAX_ROTATED_POINTS`` rotated points (checked before allocating).
     """
+    prep = _prepare(current_points, reference, initial_pose, search_range, resolution_m, angular_resolution_rad,
+                    max_range_m, sigma_m, min_score, method)
+    if isinstance(prep, GridMatchResult):
+        return prep
+    search_fn = _branch_and_bound if method == "branch_and_bound" else _exhaustive
+    best, lin, evaluated = search_fn(prep.win, prep.threshold)
+    if best < prep.threshold:
+        return prep.no_match(evaluated)
+    return prep.result(best, lin, evaluated, f"best of {prep.n_candidates} candidates ({method})")
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """A validated match: the window, the moved-to-raster points, the score threshold."""
+
+    win: _Window
+    ref: CorrelativeReference
+    pose0: np.ndarray
+    n: int
+    threshold: int
+    min_score: float
+
+    @property
+    def n_candidates(self) -> int:
+        na, nx, ny = self.win.n
+        return na * nx * ny
+
+    def stats(self) -> dict:
+        return dict(n_candidates=self.n_candidates, resolution_m=self.ref.resolution_m,
+                    angular_resolution_rad=self.win.angular_step)
+
+    def no_match(self, evaluated: int) -> GridMatchResult:
+        why = ("no current point lands near the reference anywhere in the search window" if self.threshold == 1
+               else f"no pose in the search window reaches min_score={self.min_score}")
+        return _failure(self.pose0, why, self.n, n_evaluated=evaluated, **self.stats())
+
+    def result(self, score_sum: int, lin: int, evaluated: int, reason: str) -> GridMatchResult:
+        """The candidate of linear index ``lin`` (a * nx * ny + ix * ny + iy) and score sum ``score_sum``."""
+        win, ref, pose0 = self.win, self.ref, self.pose0
+        na, nx, ny = win.n
+        a, rest = divmod(int(lin), nx * ny)
+        ix, iy = divmod(rest, ny)
+        wa, wx, wy = win.steps.tolist()
+        da = a - wa if wa >= 0 else a - na // 2
+        pose = np.array([pose0[0] + (ix - wx) * ref.resolution_m, pose0[1] + (iy - wy) * ref.resolution_m,
+                         win.angles[a]])
+        return GridMatchResult(pose=pose, score=int(score_sum) / (self.n * RASTER_MAX),
+                               covariance=_covariance(win, a, ix, iy, ref.resolution_m), ok=True, reason=reason,
+                               n_points=self.n, index=(da, ix - wx, iy - wy), n_evaluated=evaluated, **self.stats())
+
+
+def _prepare(current_points, reference, initial_pose, search_range, resolution_m, angular_resolution_rad,
+             max_range_m, sigma_m, min_score, method) -> _Prepared | GridMatchResult:
+    """Validate the arguments of :func:`match_scans_grid` and build its window (or the failure result)."""
     pose0 = np.asarray(initial_pose, dtype=np.float64).reshape(-1)
     if pose0.shape != (3,) or not np.isfinite(pose0).all():
         raise ValueError(f"initial_pose must be three finite numbers [x, y, theta], got {initial_pose!r}")
@@ -578,24 +637,108 @@ def match_scans_grid(
     if ref.n_points < MIN_SCAN_POINTS:
         return _failure(pose0, f"too few valid points in the reference scan ({ref.n_points} < {MIN_SCAN_POINTS})", n)
     win = _window(ref, cur, pose0, search, angular_resolution_rad)
-    na, nx, ny = win.n
-    stats = dict(n_candidates=na * nx * ny, resolution_m=ref.resolution_m, angular_resolution_rad=win.angular_step)
     threshold = max(1, int(math.ceil(min_score * n * RASTER_MAX - 1e-9)))
-    search_fn = _branch_and_bound if method == "branch_and_bound" else _exhaustive
-    best, lin, evaluated = search_fn(win, threshold)
-    if best < threshold:
-        why = ("no current point lands near the reference anywhere in the search window" if threshold == 1
-               else f"no pose in the search window reaches min_score={min_score}")
-        return _failure(pose0, why, n, n_evaluated=evaluated, **stats)
-    a, rest = divmod(lin, nx * ny)
-    ix, iy = divmod(rest, ny)
-    wa, wx, wy = win.steps.tolist()
-    da = a - wa if wa >= 0 else a - na // 2
-    pose = np.array([pose0[0] + (ix - wx) * ref.resolution_m, pose0[1] + (iy - wy) * ref.resolution_m, win.angles[a]])
-    return GridMatchResult(pose=pose, score=best / (n * RASTER_MAX),
-                           covariance=_covariance(win, a, ix, iy, ref.resolution_m), ok=True,
-                           reason=f"best of {na * nx * ny} candidates ({method})", n_points=n,
-                           index=(da, ix - wx, iy - wy), n_evaluated=evaluated, **stats)
+    return _Prepared(win, ref, pose0, n, threshold, min_score)
+
+
+#: match_scans_grid_peaks keeps at most this many nodes per level (the best bounds) while collecting candidates.
+MAX_PEAK_NODES = 200_000
+
+
+def match_scans_grid_peaks(
+    current_points: np.ndarray,
+    reference: np.ndarray | CorrelativeReference,
+    *,
+    initial_pose: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+    search_range: tuple[float, float, float] | np.ndarray = (4.0, 4.0, math.pi / 4),
+    max_peaks: int = 5,
+    min_ratio: float = 0.6,
+    separation: tuple[float, float] = (0.5, 0.3),
+    resolution_m: float | None = None,
+    angular_resolution_rad: float | None = None,
+    max_range_m: float | None = None,
+    sigma_m: float | None = None,
+    min_score: float = 0.0,
+) -> list[GridMatchResult]:
+    """The distinct good poses of a search window, best first: for scenes that repeat (corridors, symmetric rooms).
+
+    The first is :func:`match_scans_grid`'s exact best; the others are the
+    best candidates of other places in the window scoring at least
+    ``min_ratio`` of it: each at least ``separation`` (metres, radians) from
+    every peak before it in translation or in rotation. At most ``max_peaks``.
+    A caller with other evidence (a motion prior, a larger map) picks among
+    them. The other peaks are collected by a branch and bound at the fixed
+    threshold ``min_ratio`` x best (every candidate above it, or, when more
+    than ``MAX_PEAK_NODES`` nodes of a level pass, those under the best
+    bounds). Arguments and result as :func:`match_scans_grid`; an empty list
+    when the window holds no match.
+    """
+    if not (isinstance(max_peaks, int) and max_peaks >= 1):
+        raise ValueError(f"max_peaks must be a positive integer, got {max_peaks!r}")
+    if not (math.isfinite(min_ratio) and 0.0 < min_ratio <= 1.0):
+        raise ValueError(f"min_ratio must be in (0, 1], got {min_ratio!r}")
+    sep_m, sep_rad = (_positive(v, "separation") for v in separation)
+    prep = _prepare(current_points, reference, initial_pose, search_range, resolution_m, angular_resolution_rad,
+                    max_range_m, sigma_m, min_score, "branch_and_bound")
+    if isinstance(prep, GridMatchResult):
+        return []
+    best, lin, evaluated = _branch_and_bound(prep.win, prep.threshold)
+    if best < prep.threshold:
+        return []
+    peaks = [prep.result(best, lin, evaluated, f"best of {prep.n_candidates} candidates (branch_and_bound)")]
+    if max_peaks == 1:
+        return peaks
+    floor = max(prep.threshold, int(math.ceil(min_ratio * best)))
+    scores, lins, more = _all_above(prep.win, floor)
+    win = prep.win
+    na, nx, ny = win.n
+    a, rest = np.divmod(lins, nx * ny)
+    ix, iy = np.divmod(rest, ny)
+    xy = np.stack((ix, iy), axis=1) * prep.ref.resolution_m
+    theta = win.angles[a]
+    order = np.argsort(-scores, kind="stable")
+    xy, theta, scores, lins = xy[order], theta[order], scores[order], lins[order]
+    taken_xy = [np.array([(peaks[0].index[1] + win.steps[1]) * prep.ref.resolution_m,
+                          (peaks[0].index[2] + win.steps[2]) * prep.ref.resolution_m])]
+    taken_theta = [float(peaks[0].pose[2])]
+    free = np.ones(len(scores), dtype=bool)
+    while len(peaks) < max_peaks:
+        for t_xy, t_theta in zip(taken_xy[-1:], taken_theta[-1:]):
+            near = np.hypot(*(xy - t_xy).T) < sep_m
+            near &= np.abs((theta - t_theta + np.pi) % (2 * np.pi) - np.pi) < sep_rad
+            free &= ~near
+        left = np.flatnonzero(free)
+        if not left.size:
+            break
+        i = int(left[0])
+        peaks.append(prep.result(int(scores[i]), int(lins[i]), evaluated + more,
+                                 f"peak {len(peaks) + 1} of {prep.n_candidates} candidates (branch_and_bound)"))
+        taken_xy.append(xy[i])
+        taken_theta.append(float(theta[i]))
+    return peaks
+
+
+def _all_above(win: _Window, threshold: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Every candidate scoring at least ``threshold`` (score sums, linear indexes), and the nodes scored.
+
+    Level by level from the roots, keeping the nodes whose bound reaches the
+    threshold (the best ``MAX_PEAK_NODES`` of them when more do).
+    """
+    _, nx, ny = win.n
+    top = win.depth
+    nodes, bound = _roots(win)
+    evaluated = bound.size
+    for level in range(top, 0, -1):
+        keep = bound >= threshold
+        nodes, bound = nodes[:, keep], bound[keep]
+        if bound.size > MAX_PEAK_NODES:
+            pick = np.argpartition(bound, bound.size - MAX_PEAK_NODES)[-MAX_PEAK_NODES:]
+            nodes, bound = nodes[:, pick], bound[pick]
+        nodes, bound = _children(win, nodes, level)
+        evaluated += bound.size
+    keep = bound >= threshold
+    nodes, bound = nodes[:, keep], bound[keep]
+    return bound, (nodes[0] * nx + nodes[1]) * ny + nodes[2], evaluated
 
 
 def match_scans_grid_ranges(

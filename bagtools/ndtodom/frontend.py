@@ -16,8 +16,14 @@ scan, in the robot base frame:
    basin. :func:`~bagtools.ndt.match_scans_grid` (correlative branch and bound)
    searches a window around the best result that covers what the robot can
    have done since the previous scan (or, with trusted odometry, what the
-   odometry's error can be), and NDT refines its result. The best normalized
-   NDT score wins.
+   odometry's error can be), and NDT refines its result. When even that
+   scores poorly, the window of what the robot can have done is searched:
+   with odometry, its best match on the submap; without, every distinct
+   correlative peak (:func:`~bagtools.ndt.match_scans_grid_peaks`) on a larger
+   submap, since a scene that repeats (a parallel corridor, the mirror image of
+   a junction after a sharp turn) can match a small submap better than the
+   place itself. The best normalized NDT score, less the prior's cost (the
+   motion model: speed, arcs, and never beyond max speed and turn rate), wins.
 4. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
    counted); an odometry motion the match contradicts beyond its noise is
    counted as a rejected odometry sample; a step faster than the robot could
@@ -39,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.ndt import NdtReference, match_scans
-from bagtools.ndt.correlative import CorrelativeReference, match_scans_grid
+from bagtools.ndt.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
 from bagtools.ndt.grid import CELL_MODELS
 from bagtools.ndtodom.steps import FrontEndRun, ScanStep
 from bagtools.transforms import wrap_to_pi
@@ -69,11 +75,22 @@ CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.
 PRIOR_GATE2 = 14.0
 #: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
 LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
+#: Beyond what the robot can do in a step (max speed and turn rate x time), the prior's cost grows by one per
+#: this much more (m, rad).
+REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
 SEARCH_SIGMAS = 3.0
 MAX_SEARCH_M = 3.0
+#: The wide search (what the robot can have done) matches against the keyframes within SUBMAP_RADIUS_M, up to this
+#: many: after a sharp turn or a gap the scan may see what only older keyframes saw, and a small submap can match a
+#: repeated scene (a parallel corridor, the mirror image of a junction) better than the place itself.
+WIDE_SUBMAP_KEYFRAMES = 15
+#: Its distinct correlative peaks (at least this share of the best) are refined by NDT and weighed by the prior.
+WIDE_PEAKS, WIDE_PEAK_RATIO = 8, 0.6
+#: A peak whose prior cost (weighted, in normalized score) exceeds this could not win: it is not refined.
+WIDE_MAX_PRIOR_COST = 0.5
 
 
 @dataclass(frozen=True)
@@ -187,6 +204,11 @@ class _Prior:
     motion model adds its cost: a step from ``origin`` runs along an arc, so
     its sideways offset from the chord at half its turn is unlikely (see
     LATERAL_SD_M). Odometry's steps follow an arc already and have no origin.
+
+    With ``reach`` (the previous scan's pose, the farthest the robot can move
+    and turn since it: max speed and turn rate times the time step), a step
+    beyond it costs steeply (REACH_SD_M, REACH_SD_RAD per unit): a scene that
+    repeats a few metres away must not pull the robot faster than it can go.
     """
 
     mean: np.ndarray
@@ -196,6 +218,7 @@ class _Prior:
     outlier_cost: float = 0.0
     kind: str = "kinematic"
     origin: np.ndarray | None = None
+    reach: tuple[np.ndarray, float, float] | None = None
 
     def mahalanobis2(self, pose: np.ndarray) -> float:
         d = _between(self.mean, pose)
@@ -206,6 +229,11 @@ class _Prior:
             sideways = step[1] * math.cos(half) - step[0] * math.sin(half)
             sd = LATERAL_SD_M + LATERAL_SD_RATIO * math.hypot(step[0], step[1])
             cost += (sideways / sd) ** 2
+        if self.reach is not None:
+            start, max_m, max_rad = self.reach
+            step = _between(start, pose)
+            cost += (max(math.hypot(step[0], step[1]) - max_m, 0.0) / REACH_SD_M) ** 2
+            cost += (max(abs(step[2]) - max_rad, 0.0) / REACH_SD_RAD) ** 2
         return cost
 
     def cost(self, pose: np.ndarray) -> float:
@@ -240,6 +268,7 @@ class _Keyframe:
     ndt: NdtReference
     first_score: float | None = None
     correlative: CorrelativeReference | None = None
+    wide: tuple[NdtReference, CorrelativeReference] | None = None  # the wide search's larger submap, when needed
 
 
 class LaserOdometry:
@@ -292,11 +321,13 @@ class LaserOdometry:
                 matches.append(searched)
                 best = max(matches, key=prior.objective)
             if best.score < self._trust_score() and prior.wide is not None:
-                # The odometry may be what is wrong: search what the robot can have done instead.
-                searched = self._search(points, kf, prior.wide, dt)
-                if searched is not None:
-                    matches.append(searched)
-                    best = max(matches, key=prior.objective)
+                # The guess may be what is wrong: search what the robot can have done instead.
+                if prior.kind == "odometry":  # rarely wrong: its best alternative on the submap is enough
+                    searched = self._search(points, kf, prior.wide, dt)
+                    matches += [] if searched is None else [searched]
+                else:  # no odometry: the scene must decide, on more of it
+                    matches = self._search_wide(points, kf, prior, dt, matches)
+                best = max(matches, key=prior.objective)
         if best.score < opts.min_score:
             self.counts[FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
@@ -329,11 +360,12 @@ class LaserOdometry:
         first = opts.init if opts.init in guesses else next(iter(guesses))
         return {first: guesses[first]} | {k: v for k, v in guesses.items() if k != first}
 
-    def _ndt(self, points: np.ndarray, kf: _Keyframe, initial: np.ndarray, source: str, prior: _Prior) -> _Match:
+    def _ndt(self, points: np.ndarray, reference: NdtReference, initial: np.ndarray, source: str,
+             prior: _Prior) -> _Match:
         """NDT from ``initial`` with the prior's component there as a MAP term (a corridor keeps the prior's position)."""
         gaussian = prior.component(initial)
         info = gaussian.information(len(points))
-        result = match_scans(points, kf.ndt, initial_pose=initial, max_iterations=self.options.max_iterations,
+        result = match_scans(points, reference, initial_pose=initial, max_iterations=self.options.max_iterations,
                              prior=(gaussian.mean, info))
         score = normalized_score(result.score, result.n_points) if result.score > 0 else 0.0
         return _Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian + info), source)
@@ -346,7 +378,7 @@ class LaserOdometry:
             initial = _between(kf.pose, guess)
             if any(_close(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
                 continue
-            matches.append(self._ndt(points, kf, initial, "ndt", prior))
+            matches.append(self._ndt(points, kf.ndt, initial, "ndt", prior))
         return matches
 
     def _prior(self, last_pose: np.ndarray, dt: float, guesses: dict[str, np.ndarray], kf: _Keyframe) -> _Prior:
@@ -356,9 +388,11 @@ class LaserOdometry:
         motion = _between(last_pose, guesses["constant-velocity"])
         sd_xy = CV_NOISE_M + 0.5 * opts.max_accel_mps2 * dt * dt + CV_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
-        origin = _between(kf.pose, last_pose) if opts.wheeled else None
+        last = _between(kf.pose, last_pose)
+        origin = last if opts.wheeled else None
         kinematic = _Prior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
-                           opts.prior_weight, origin=origin)
+                           opts.prior_weight, origin=origin,
+                           reach=(last, opts.max_speed_mps * dt, opts.max_turn_rate_radps * dt))
         if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
             return kinematic
         if "odom" not in guesses:
@@ -395,19 +429,55 @@ class LaserOdometry:
         typical = float(np.median(recent)) if recent else 0.0
         return max(self.options.min_score, self.options.trust_score_ratio * typical)
 
-    def _search(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float) -> _Match | None:
-        """Grid search over the prior's 3-sigma window (within what the robot can do), then NDT."""
+    def _search_window(self, prior: _Prior, dt: float) -> tuple[float, float, float]:
+        """The prior's 3-sigma window (x_m, y_m, theta_rad), within what the robot can do in ``dt``."""
         opts = self.options
         half_xy = float(np.clip(SEARCH_SIGMAS * prior.sd[0], 0.2, min(opts.max_speed_mps * dt + 0.2, MAX_SEARCH_M)))
         half_theta = float(np.clip(SEARCH_SIGMAS * prior.sd[2], 0.1, min(opts.max_turn_rate_radps * dt + 0.1, math.pi)))
+        return half_xy, half_xy, half_theta
+
+    def _search(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float) -> _Match | None:
+        """Grid search over the prior's window, then NDT."""
+        opts = self.options
         if kf.correlative is None:
             kf.correlative = CorrelativeReference.from_points(kf.points, resolution_m=opts.search_resolution_m)
         grid = match_scans_grid(points, kf.correlative, initial_pose=prior.mean,
-                                search_range=(half_xy, half_xy, half_theta),
+                                search_range=self._search_window(prior, dt),
                                 angular_resolution_rad=opts.search_angular_resolution_rad)
         if not grid.ok:
             return None
-        return self._ndt(points, kf, np.asarray(grid.pose, dtype=np.float64), "search", prior)
+        return self._ndt(points, kf.ndt, np.asarray(grid.pose, dtype=np.float64), "search", prior)
+
+    def _search_wide(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float,
+                     matches: list[_Match]) -> list[_Match]:
+        """Search what the robot can have done (``prior.wide``'s window) against a larger submap: every distinct
+        correlative peak and every match so far, refined by NDT on that submap, for the prior to weigh."""
+        opts = self.options
+        ndt, correlative = self._wide_reference(kf)
+        peaks = match_scans_grid_peaks(points, correlative, initial_pose=prior.wide.mean,
+                                       search_range=self._search_window(prior.wide, dt),
+                                       angular_resolution_rad=opts.search_angular_resolution_rad,
+                                       max_peaks=WIDE_PEAKS, min_ratio=WIDE_PEAK_RATIO)
+        starts = [(m.pose, m.source) for m in matches] + [(np.asarray(p.pose, dtype=np.float64), "search")
+                                                          for p in peaks]
+        refined: list[_Match] = []
+        for initial, source in starts:
+            if any(_close(initial, m.pose, AGREE_M, AGREE_RAD) for m in refined):
+                continue
+            if prior.weight * prior.cost(initial) > WIDE_MAX_PRIOR_COST:  # the prior rules it out whatever it scores
+                continue
+            refined.append(self._ndt(points, ndt, initial, source, prior))
+        return refined
+
+    def _wide_reference(self, kf: _Keyframe) -> tuple[NdtReference, CorrelativeReference]:
+        """The keyframe's larger submap (built once): its own and up to WIDE_SUBMAP_KEYFRAMES - 1 earlier ones."""
+        if kf.wide is None:
+            opts = self.options
+            points = self._submap_points(kf.index, kf.pose, self.run.steps[kf.index].points_base,
+                                         WIDE_SUBMAP_KEYFRAMES)
+            kf.wide = (NdtReference.from_points(points, opts.cell_size_m, opts.cell_model),
+                       CorrelativeReference.from_points(points, resolution_m=opts.search_resolution_m))
+        return kf.wide
 
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
@@ -431,19 +501,23 @@ class LaserOdometry:
     def _new_keyframe(self, index: int, pose: np.ndarray, points: np.ndarray) -> None:
         """Make scan ``index`` the reference, with the last ``submap_keyframes`` keyframes' points moved into it."""
         opts = self.options
+        submap = self._submap_points(index, pose, points, opts.submap_keyframes)
+        self._keyframe = _Keyframe(index, pose.copy(), submap,
+                                   NdtReference.from_points(submap, opts.cell_size_m, opts.cell_model))
+
+    def _submap_points(self, index: int, pose: np.ndarray, points: np.ndarray, n_keyframes: int) -> np.ndarray:
+        """``points`` (scan ``index``, at ``pose``) and those of the ``n_keyframes`` - 1 keyframes before it
+        within SUBMAP_RADIUS_M, in its base frame."""
         parts = [points]
-        for k in reversed(self.run.keyframe_indexes[-(opts.submap_keyframes - 1):] if opts.submap_keyframes > 1 else []):
-            if k == index:
-                continue
+        earlier = [k for k in self.run.keyframe_indexes if k != index and k < index]
+        for k in reversed(earlier[-(n_keyframes - 1):] if n_keyframes > 1 else []):
             older = self.run.steps[k]
             rel = _between(pose, older.pose)
             if np.hypot(rel[0], rel[1]) > SUBMAP_RADIUS_M:
                 break
             c, s = np.cos(rel[2]), np.sin(rel[2])
             parts.append(older.points_base @ np.array([[c, s], [-s, c]]) + rel[:2])
-        submap = np.concatenate(parts) if len(parts) > 1 else points
-        self._keyframe = _Keyframe(index, pose.copy(), submap,
-                                   NdtReference.from_points(submap, opts.cell_size_m, opts.cell_model))
+        return np.concatenate(parts) if len(parts) > 1 else points
 
     # -- reporting -----------------------------------------------------------------------------
 

@@ -10,6 +10,7 @@ from bagtools.ndt import (
     GridMatchResult,
     match_scans,
     match_scans_grid,
+    match_scans_grid_peaks,
     match_scans_grid_ranges,
     ranges_to_points,
 )
@@ -332,3 +333,71 @@ def test_max_pooled_levels_bound_the_raster(pairs):
         assert levels[k, i, j] == levels[0, i:i + 2**k, j:j + 2**k].max()
     assert levels[0].sum() == reference.raster.astype(np.int64).sum()
     assert correlative.RASTER_MAX == reference.raster.max()
+
+
+# -- match_scans_grid_peaks: the distinct good poses of a window ------------------------------------------
+
+PEAK_KW = {"search_range": (1.0, 1.0, np.pi), "resolution_m": 0.1, "max_peaks": 6, "min_ratio": 0.5,
+           "separation": (0.5, 0.3)}
+
+
+def test_first_peak_is_the_exact_best_and_the_rest_are_distinct_and_good():
+    reference_points, current, truth = local_map_case(5)
+    initial = truth + (0.6, -0.5, 2.0)
+    reference = CorrelativeReference.from_points(reference_points, resolution_m=0.1)
+    peaks = match_scans_grid_peaks(current, reference, initial_pose=initial, **PEAK_KW)
+    best = match_scans_grid(current, reference, initial_pose=initial, search_range=PEAK_KW["search_range"])
+    assert_same_candidate(peaks[0], best)
+    assert 2 <= len(peaks) <= PEAK_KW["max_peaks"]
+    scores = [p.score for p in peaks]
+    assert scores == sorted(scores, reverse=True) and scores[-1] >= PEAK_KW["min_ratio"] * scores[0]
+    for i, a in enumerate(peaks):
+        # each peak's score is its pose's score (a one-candidate window there says the same)
+        alone = match_scans_grid(current, reference, initial_pose=a.pose, search_range=(0.0, 0.0, 0.0))
+        assert alone.score == pytest.approx(a.score, abs=1e-12)
+        for b in peaks[:i]:
+            d = a.pose - b.pose
+            far_m = np.hypot(d[0], d[1]) >= PEAK_KW["separation"][0] - 1e-9
+            far_rad = abs((d[2] + np.pi) % (2 * np.pi) - np.pi) >= PEAK_KW["separation"][1] - 1e-9
+            assert far_m or far_rad
+
+
+def test_peaks_miss_no_good_place_of_the_window():
+    """Every candidate scoring above the ratio (all of them scored, as the exhaustive search does) lies near a peak."""
+    reference_points, current, truth = local_map_case(6)
+    initial = truth + (0.3, 0.2, 1.0)
+    kw = {**PEAK_KW, "search_range": (0.6, 0.6, np.pi), "max_peaks": 1000, "angular_resolution_rad": 0.05}
+    peaks = match_scans_grid_peaks(current, reference_points, initial_pose=initial, **kw)
+    prep = correlative._prepare(current, reference_points, initial, kw["search_range"], 0.1, 0.05, None, None, 0.0,
+                                "exhaustive")
+    na, nx, ny = prep.win.n
+    a, ix, iy = (g.reshape(-1) for g in np.meshgrid(np.arange(na), np.arange(nx), np.arange(ny), indexing="ij"))
+    sums = correlative._scores(prep.win, a, ix * prep.win.stride + iy, 0)
+    good = sums >= np.ceil(kw["min_ratio"] * sums.max())
+    xy = np.stack((initial[0] + (ix[good] - prep.win.steps[1]) * 0.1, initial[1] + (iy[good] - prep.win.steps[2]) * 0.1),
+                  axis=1)
+    theta = prep.win.angles[a[good]]
+    near_any = np.zeros(len(xy), dtype=bool)
+    for p in peaks:
+        near_any |= ((np.hypot(*(xy - p.pose[:2]).T) <= 0.5 + 1e-9)
+                     & (np.abs((theta - p.pose[2] + np.pi) % (2 * np.pi) - np.pi) <= 0.3 + 1e-9))
+    assert near_any.all()
+    assert peaks[0].score == sums.max() / (prep.n * correlative.RASTER_MAX)
+
+
+def test_peaks_hold_the_true_pose_where_a_mirror_image_scores_higher():
+    # The TurtleBot3 world is nearly symmetric under a half turn: over every heading, the true pose and its mirror
+    # image are both peaks, whichever wins; the caller's other evidence (a prior) picks.
+    reference_points, current, truth = local_map_case(4)
+    peaks = match_scans_grid_peaks(current, reference_points, initial_pose=(0.0, 0.0, 0.0),
+                                   search_range=(2.0, 2.0, np.pi), resolution_m=0.05, max_peaks=8, min_ratio=0.5)
+    errors = [pose_error(p.pose, truth) for p in peaks]
+    assert any(t < 0.1 and r < 0.05 for t, r in errors), errors
+
+
+def test_peaks_of_a_window_without_a_match_are_none_and_bad_parameters_raise(pairs):
+    assert match_scans_grid_peaks(np.zeros((2, 2)), pairs[0].reference_points) == []
+    for kwargs, message in (({"max_peaks": 0}, "max_peaks"), ({"min_ratio": 0.0}, "min_ratio"),
+                            ({"separation": (0.0, 0.1)}, "separation")):
+        with pytest.raises(ValueError, match=message):
+            match_scans_grid_peaks(pairs[0].current_points, pairs[0].reference_points, **kwargs)

@@ -93,8 +93,10 @@ def test_csail_without_odometry_does_not_diverge(csail: Path) -> None:
     trans, rot = per_scan(result)
     s = result.summary
     assert s["fallbacks"] <= 4  # at most 1% of 405 pairs
-    assert np.median(trans) < 0.03 and rot.mean() < 1.5
-    assert np.count_nonzero(trans > 0.2) <= 20
+    # Issue targets: per step at most 3 cm and 1 degree (asserted loosely); the sharp turns after a gap whose mirror
+    # image matches as well (steps 52-53) are found by the wide search on a larger submap.
+    assert trans.mean() < 0.035 and rot.mean() < 1.0, (trans.mean(), rot.mean())
+    assert np.count_nonzero(trans > 0.2) <= 4
 
 
 def test_fast_planar_helpers_equal_the_transforms_module() -> None:
@@ -122,3 +124,22 @@ def test_a_wheeled_robot_does_not_step_sideways() -> None:
     plain = _Prior(prior.mean, prior.sd)
     assert prior.mahalanobis2(on_arc) - plain.mahalanobis2(on_arc) < 1e-9
     assert prior.mahalanobis2(sideways) - plain.mahalanobis2(sideways) > 25.0
+
+
+def test_a_step_beyond_what_the_robot_can_do_costs_steeply() -> None:
+    """The kinematic prior's reach: within max speed x time nothing is added; 0.15 m or 0.15 rad beyond, 9 units."""
+    from bagtools.ndtodom.frontend import REACH_SD_M, REACH_SD_RAD, _Prior
+
+    start = np.array([0.5, 0.2, 0.3])
+    prior = _Prior(start, np.array([10.0, 10.0, 10.0]), reach=(start, 2.0, 1.0))
+    plain = _Prior(prior.mean, prior.sd)
+
+    def ahead(d: float, turn: float) -> np.ndarray:
+        return np.array([start[0] + d * np.cos(start[2]), start[1] + d * np.sin(start[2]), start[2] + turn])
+
+    for within in (ahead(1.99, 0.0), ahead(0.0, -0.99), ahead(1.5, 0.9)):
+        assert prior.mahalanobis2(within) == pytest.approx(plain.mahalanobis2(within))
+    assert prior.mahalanobis2(ahead(2.15, 0.0)) - plain.mahalanobis2(ahead(2.15, 0.0)) == pytest.approx(
+        (0.15 / REACH_SD_M) ** 2)
+    assert prior.mahalanobis2(ahead(1.0, -1.15)) - plain.mahalanobis2(ahead(1.0, -1.15)) == pytest.approx(
+        (0.15 / REACH_SD_RAD) ** 2)

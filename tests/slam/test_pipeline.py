@@ -121,6 +121,19 @@ def test_real_csail_log_loops_are_right(csail_odom: Path) -> None:
     assert max(errors) < 0.5 and np.median(errors) < 0.06 and np.percentile(errors, 90) < 0.1
 
 
+
+def test_real_csail_log_without_odometry_is_consistent(csail_odom: Path) -> None:
+    """Issue target on the scans alone (the real front end, the real loop closure): aligned APE at most 0.3 m
+    against GMapping's trajectory over the 380 m path."""
+    bag = csail_odom.parent / "csail_scans"
+    if not bag.is_dir():
+        pytest.skip(f"real bag not available: {bag}")
+    result = SlamPipeline(bag, SlamOptions()).run()
+    errors = result.summary["errors_slam"]
+    assert errors["ape_aligned_m"]["rmse"] < 0.3, errors["ape_aligned_m"]
+    assert errors["relative_gap_20"]["trans_median_m"] < 0.1, errors["relative_gap_20"]
+
+
 # -- bad input ----------------------------------------------------------------------------------
 
 
