@@ -66,8 +66,13 @@ def run(quick: bool) -> list[Row]:
                                     f"{summary['scans']} scans, {summary['loop_closure']['accepted']} loops)",
                             duration / whole_s, "x real time", "front end alone", duration / front_s, True,
                             ">= 10 (a tenth of the bag's duration)"))
-            if "errors_slam" in summary and bag == sim:
+            if "errors_slam" in summary:
+                slam, front = summary["errors_slam"], summary["errors_front_end"]
                 rows.append(Row("slam", f"APE after SE(2) alignment, {label} ({duration:.0f} s)",
-                                summary["errors_slam"]["ape_aligned_m"]["rmse"], "m", "front end alone",
-                                summary["errors_front_end"]["ape_aligned_m"]["rmse"], False, "<= 0.02 m"))
+                                slam["ape_aligned_m"]["rmse"], "m", "front end alone",
+                                front["ape_aligned_m"]["rmse"], False, "<= 0.02 m" if bag == sim else "<= 0.3 m"))
+                if bag != sim:  # the real logs' reference is GMapping's trajectory
+                    rows.append(Row("slam", f"relative error between scans 20 apart (mean), {label}",
+                                    slam["relative_gap_20"]["trans_mean_m"], "m", "front end alone",
+                                    front["relative_gap_20"]["trans_mean_m"], False, "<= 0.10 m"))
     return rows
