@@ -68,7 +68,7 @@ CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO = 0.05, 0.03, 0.2
 #: scene cannot tell poses apart (a corridor), the prior decides; where it can, the score does.
 PRIOR_WEIGHT_DEFAULT = 0.01
 #: What overruling the odometry costs, in normalized score (see _Prior).
-OUTLIER_COST = 0.3
+OUTLIER_COST = 0.25
 #: Without odometry: constant velocity's narrow spread (m, rad, share of the motion), and what overruling it costs.
 CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.08
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
