@@ -5,7 +5,8 @@
 fresh process: ``bagtools batch ndt-odom BAGS --out DIR --workers 2`` (Python,
 Dask, the embedded LocalCluster, the bags, fleet.csv/.parquet/.png, the
 cluster's shutdown) against a Python loop over the same library calls the
-single command makes (``NdtOdomPipeline(bag).run()`` then ``write_ndt_odom``)
+single command makes (``NdtOdomPipeline(bag, keep_scans=True).run()`` then
+``write_ndt_odom``: the scans go into results.mcap, as with ``bagtools ndt-odom``)
 in one process. The sides alternate and the best of each is kept, so a burst
 of load from elsewhere does not decide the ratio.
 
@@ -45,7 +46,7 @@ from pathlib import Path
 from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 out = Path(sys.argv[1])
 for bag in sys.argv[2:]:
-    result = NdtOdomPipeline(bag, NdtOdomOptions()).run()
+    result = NdtOdomPipeline(bag, NdtOdomOptions(), keep_scans=True).run()  # as `bagtools ndt-odom` does
     write_ndt_odom(result, out / Path(bag).name)
 """
 

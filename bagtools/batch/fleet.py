@@ -26,6 +26,15 @@ FLEET_FILES = ["fleet.csv", "fleet.parquet", "fleet.png"]
 _STATUS_COLOURS = {OK: "tab:green", SKIPPED: "tab:gray", FAILED: "tab:red"}
 
 
+def preload_fleet_writers() -> None:
+    """Import what :func:`write_fleet` needs (matplotlib, pyarrow: about 0.6 s), e.g. while the last bags run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401
+    import pyarrow.parquet  # noqa: F401
+
+
 def fleet_csv(rows: list[dict], columns: list[str]) -> str:
     """The rows as CSV text with a header (None as an empty cell)."""
     buffer = io.StringIO()

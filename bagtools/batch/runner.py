@@ -22,6 +22,7 @@ from __future__ import annotations
 import importlib.util
 import logging
 import os
+import threading
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bagtools.batch.fleet import preload_fleet_writers
 from bagtools.batch.plan import BatchPlan, claim_out_dir, row_columns
 from bagtools.batch.task import (
     FAILED, SKIPPED, BagTask, completed_row, new_row, one_line, read_marker, run_task,
@@ -112,7 +114,7 @@ class BatchRun:
                 claim_out_dir(self.plan.out_dir, self.plan.command)
                 futures = self._submit(client)
                 try:
-                    self._collect(futures)
+                    self._collect(futures, len(client.nthreads()))
                 except BaseException:
                     client.cancel(futures, force=True)
                     raise
@@ -208,14 +210,19 @@ class BatchRun:
             futures[future] = task
         return futures
 
-    def _collect(self, futures: dict[Any, BagTask]) -> None:
+    def _collect(self, futures: dict[Any, BagTask], workers: int) -> None:
+        """Rows of the finished ``futures`` as they come, with a progress bar; ``workers``: how many run them."""
         from distributed import as_completed
 
         columns = row_columns(self.plan.job)
         skipped = sum(row["status"] == SKIPPED for row in self.rows.values())
+        remaining = len(futures)
         with progress_bar(total=self.plan.total, desc=f"batch {self.plan.command}", unit="bag") as bar:
             bar.update(len(self.rows))
             for future in as_completed(list(futures)):
+                remaining -= 1
+                if remaining == workers - 1:  # a worker is idle for good: import the fleet table's writers meanwhile
+                    threading.Thread(target=preload_fleet_writers, name="bagtools-preload", daemon=True).start()
                 task = futures[future]
                 row = row_of_future(future, task)
                 self.rows[task.name] = {k: row.get(k) for k in columns}
