@@ -192,7 +192,7 @@ def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
     return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=p["resolution"],
                                     max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],
                                     loop_closure=not p["no_loop_closure"], loop_min_score=p["loop_min_score"],
-                                    keep_scans=not p["no_mcap"]),
+                                    keep_scans=not p["no_mcap"], relations=p["relations"]),
                         mcap=not p["no_mcap"])
 
 

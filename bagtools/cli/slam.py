@@ -20,10 +20,15 @@ import click
 @click.option("--max-range", type=float, default=None,
               help="Use returns up to this range [m] (map and loop closure); farther ones only clear free space. "
                    "[default: 20 m]")
+@click.option("--relations", type=click.Path(path_type=str), default=None,
+              help="Score both trajectories against this .relations file of the log (Kuemmerle et al. 2009: "
+                   "'stamp_1 stamp_2 x y z roll pitch yaw' per line, as published for the Intel, Freiburg and MIT "
+                   "benchmark logs).")
 @click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, paths, scans and loops for Foxglove).")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
-         no_loop_closure: bool, no_odometry: bool, max_range: float | None, no_mcap: bool, force: bool) -> None:
+         no_loop_closure: bool, no_odometry: bool, max_range: float | None, relations: str | None, no_mcap: bool,
+         force: bool) -> None:
     """SLAM of BAG's laser scans: laser odometry, loop closures, a pose graph optimized with GTSAM, the map.
 
     Writes OUT/trajectory.tum (the optimized robot base pose at every scan, in
@@ -31,8 +36,8 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     (keyframes and constraints, VERTEX_SE2/EDGE_SE2), map.pgm + map.yaml (nav2
     map_server format), map.png (the map, the trajectory and the loop
     closures), summary.json (keyframes, loop candidates accepted and rejected by
-    reason, optimization, timing, and for bags with /ground_truth the errors of
-    SLAM and of the laser odometry), ground_truth.tum (bags with /ground_truth)
+    reason, optimization, timing, and for bags with /ground_truth, or with
+    --relations, the errors of SLAM and of the laser odometry), ground_truth.tum (bags with /ground_truth)
     and results.mcap (/map, the paths, /tf, the scans and /loop_closures, to
     open in Foxglove or replay for RViz).
 
@@ -40,6 +45,7 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     Example:
       bagtools slam out/sim --out out/slam
       bagtools slam csail.mcap --out slam_scans --no-odometry --max-range 30
+      bagtools slam intel --out slam_intel --relations intel.relations
       python step_error.py out/slam/trajectory.tum out/slam/ground_truth.tum --align
     """
     from bagtools.outputs import check_outputs
@@ -49,7 +55,7 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
 
     options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
                           loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
-                          loop_min_score=loop_min_score, keep_scans=not no_mcap)
+                          loop_min_score=loop_min_score, keep_scans=not no_mcap, relations=relations)
     result = SlamPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
@@ -70,3 +76,13 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
         if ape is not None:
             gap_text = f"{gap:.3f} m" if gap is not None else "n/a"
             click.echo(f"{label}: APE {ape:.3f} m after alignment (rmse), motion error over 20 scans {gap_text} (mean)")
+    for name, label in (("slam", "SLAM"), ("front_end", "laser odometry")):
+        scored = s.get("relations", {}).get(name)
+        if not scored:
+            continue
+        if "trans_mean_m" not in scored:
+            click.echo(f"{label}: relations: {scored.get('unavailable')}")
+            continue
+        click.echo(f"{label}: relations error {scored['trans_mean_m']:.3f} +- {scored['trans_std_m']:.3f} m, "
+                   f"{scored['rot_mean_deg']:.2f} +- {scored['rot_std_deg']:.2f} deg over {scored['used']} of "
+                   f"{scored['relations']} relations")

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bagtools.cli import main
@@ -75,3 +76,39 @@ def test_end_to_end_with_and_without_odometry(tmp_path: Path) -> None:
     assert not summary["front_end"]["odometry_used"] and summary["loop_closure"]["candidates"] == 0
     assert summary["map"]["grid"]["cell_size_m"] == 0.1 and summary["map"]["max_range_m"] == [3.0]
     assert (out / "trajectory.tum").read_text() == (out / "odometry.tum").read_text()
+
+
+def test_relations_score_both_trajectories(tmp_path: Path) -> None:
+    """--relations (Kuemmerle et al.'s metric): relations from the bag's true poses, consecutive and 20 scans apart."""
+    from bagtools.trajectory import Trajectory, read_tum, relations_from_trajectory, relations_text
+
+    bag = FIXTURES / "sim_random_nocloud_20s"
+    first = _run("slam", str(bag), "--out", str(tmp_path / "first"), "--no-mcap")
+    assert first.returncode == 0, first.stderr
+    truth = read_tum(tmp_path / "first" / "ground_truth.tum")
+    at_scans = np.isin(truth.stamps_ns, read_tum(tmp_path / "first" / "trajectory.tum").stamps_ns)
+    truth = Trajectory(truth.stamps_ns[at_scans], truth.poses[at_scans])
+    n = len(truth)
+    assert n > 90
+    pairs = [(i, i + 1) for i in range(n - 1)] + [(i, i + 20) for i in range(0, n - 20, 5)]
+    relations = tmp_path / "sim.relations"
+    relations.write_text(relations_text(relations_from_trajectory(truth, np.array(pairs))) + "1.0 2.0 0 0 0 0 0 0\n")
+    done = _run("slam", str(bag), "--out", str(tmp_path / "scored"), "--no-mcap", "--relations", str(relations))
+    assert done.returncode == 0, done.stderr
+    assert "SLAM: relations error" in done.stdout and "laser odometry: relations error" in done.stdout
+    scored = json.loads((tmp_path / "scored" / "summary.json").read_text())["relations"]
+    assert scored["file"] == str(relations)
+    for name in ("slam", "front_end"):
+        assert scored[name]["relations"] == len(pairs) + 1 and scored[name]["used"] == len(pairs)
+        assert scored[name]["missing"] == 1  # the last line's stamps are not in the bag
+        assert scored[name]["trans_mean_m"] < 0.02 and scored[name]["rot_mean_deg"] < 0.5, scored[name]
+
+
+def test_a_bad_relations_file_is_refused_before_the_work(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.relations"
+    bad.write_text("1.0 2.0 0.1\n")
+    for path in (bad, tmp_path / "missing.relations"):
+        done = _run("slam", str(FIXTURES / "sim_random_nocloud_20s"), "--out", str(tmp_path / "out"),
+                    "--relations", str(path))
+        assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+        assert done.stderr.startswith(f"bagtools: {path}: ") and not (tmp_path / "out").exists()

@@ -1,0 +1,107 @@
+"""Pose relations (Kuemmerle et al. 2009): reading .relations files and the relations metric."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagtools.errors import BagtoolsError
+from bagtools.trajectory import (
+    Relations, Trajectory, read_relations, relation_errors, relations_from_trajectory, relations_text,
+)
+from bagtools.transforms import pose2tform, se2_compose
+
+T0_NS = 1_000_000_000_000_000_000
+
+
+def _trajectory(poses: np.ndarray, step_ns: int = 100_000_000) -> Trajectory:
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    return Trajectory(T0_NS + step_ns * np.arange(len(poses), dtype=np.int64), pose2tform(poses).reshape(-1, 4, 4))
+
+
+def _path(n: int = 30) -> np.ndarray:
+    """A curved planar path: 0.3 m steps turning 0.05 rad each."""
+    poses = [np.zeros(3)]
+    for _ in range(n - 1):
+        poses.append(se2_compose(poses[-1], np.array([0.3, 0.0, 0.05])))
+    return np.array(poses)
+
+
+def test_reads_the_published_format_with_exact_stamps(tmp_path: Path) -> None:
+    path = tmp_path / "log.relations"
+    path.write_text("# a comment\n\n976052905.167303 976052911.885496 -0.056990 -0.128430 0.000000 0.000000 0.000000 "
+                    "-1.682210\n976052896.784509 976052905.167303 -0.153130 -0.051420 0 0 0 -2.405850  # trailing\n")
+    rel = read_relations(path)
+    assert len(rel) == 2
+    assert rel.first_ns.tolist() == [976052905_167303000, 976052896_784509000]
+    assert rel.second_ns.tolist() == [976052911_885496000, 976052905_167303000]
+    np.testing.assert_allclose(rel.motion, [[-0.05699, -0.12843, -1.68221], [-0.15313, -0.05142, -2.40585]])
+
+
+def test_text_round_trip(tmp_path: Path) -> None:
+    traj = _trajectory(_path())
+    pairs = np.array([[0, 1], [3, 9], [20, 2]])
+    rel = relations_from_trajectory(traj, pairs)
+    (tmp_path / "r.relations").write_text(relations_text(rel))
+    back = read_relations(tmp_path / "r.relations")
+    assert back.first_ns.tolist() == traj.stamps_ns[pairs[:, 0]].tolist()
+    assert back.second_ns.tolist() == traj.stamps_ns[pairs[:, 1]].tolist()
+    np.testing.assert_allclose(back.motion, rel.motion, atol=1e-6)
+
+
+def test_a_perfect_trajectory_scores_zero_and_a_known_error_is_measured() -> None:
+    poses = _path()
+    truth = _trajectory(poses)
+    pairs = np.stack([np.arange(29), np.arange(1, 30)], axis=1)
+    rel = relations_from_trajectory(truth, pairs)
+    perfect = relation_errors(rel, truth)
+    assert perfect["used"] == 29 and perfect["missing"] == 0
+    assert perfect["trans_mean_m"] < 1e-12 and perfect["rot_mean_deg"] < 1e-9
+    # Pose 10 displaced by 5 cm along its own y axis: the relations 9->10 and 10->11 see it, the others do not.
+    moved = poses.copy()
+    moved[10] = se2_compose(poses[10], np.array([0.0, 0.05, 0.0]))
+    scored = relation_errors(rel, _trajectory(moved))
+    assert scored["trans_max_m"] == pytest.approx(0.05, abs=1e-9)
+    assert scored["trans_mean_m"] == pytest.approx(2 * 0.05 / 29, rel=0.05)
+    assert scored["rot_mean_deg"] < 1e-9
+    # A heading error of 1 degree at pose 10 shows as 1 degree in both relations, and moves pose 11 as seen from 10.
+    turned = poses.copy()
+    turned[10, 2] += np.radians(1.0)
+    scored = relation_errors(rel, _trajectory(turned))
+    assert scored["rot_mean_deg"] == pytest.approx(2.0 / 29, rel=1e-6)
+    assert scored["trans_max_m"] == pytest.approx(0.3 * np.radians(1.0), rel=0.01)
+
+
+def test_relations_without_poses_are_counted_not_guessed() -> None:
+    truth = _trajectory(_path())
+    rel = relations_from_trajectory(truth, np.array([[0, 1], [1, 2]]))
+    shifted = Relations(rel.first_ns + np.array([0, 50_000_000]), rel.second_ns, rel.motion)  # 50 ms off: no pose
+    scored = relation_errors(shifted, truth)
+    assert scored["relations"] == 2 and scored["used"] == 1 and scored["missing"] == 1
+    later = Relations(rel.first_ns + 10**12, rel.second_ns + 10**12, rel.motion)
+    none = relation_errors(later, truth)
+    assert none["used"] == 0 and "unavailable" in none and "trans_mean_m" not in none
+
+
+@pytest.mark.parametrize("text,message", [
+    ("", "holds no relation"),
+    ("# only a comment\n", "holds no relation"),
+    ("1.0 2.0 0.1 0.2 0 0 0\n", "line 1 has 7 fields, expected 8"),
+    ("1.0 2.0 0.1 0.2 0 0 0 0.1\n1.0 2.0 x 0.2 0 0 0 0.1\n", "line 2 is not a relation"),
+    ("-1.0 2.0 0.1 0.2 0 0 0 0.1\n", "line 1 is not a relation"),
+    ("1.0 2.0 nan 0.2 0 0 0 0.1\n", "line 1 holds a value that is not finite"),
+])
+def test_bad_files_are_one_line_errors_naming_the_file(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.relations"
+    path.write_text(text)
+    with pytest.raises(BagtoolsError, match=message) as err:
+        read_relations(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_missing_file_names_it(tmp_path: Path) -> None:
+    with pytest.raises(BagtoolsError, match="cannot read the relations file") as err:
+        read_relations(tmp_path / "none.relations")
+    assert "none.relations" in str(err.value)
