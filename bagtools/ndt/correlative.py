@@ -75,6 +75,8 @@ METHODS = ("branch_and_bound", "exhaustive")
 # Per-point log-likelihood of a raster value (floored at the kernel cutoff), for the covariance.
 _LOG_LIKELIHOOD = np.maximum(np.log(np.maximum(np.arange(RASTER_MAX + 1), 0.5) / RASTER_MAX),
                              -0.5 * KERNEL_CUTOFF_SIGMAS**2).astype(np.float32)
+# Up to this many points, a node's score sum fits in uint32.
+_UINT32_POINTS = (2**32 - 1) // RASTER_MAX
 # Gathers are done in chunks of about this many lookups to bound temporary memory.
 _CHUNK_LOOKUPS = 1 << 21
 
@@ -318,7 +320,8 @@ def _scores(win: _Window, a: np.ndarray, xy: np.ndarray, level: int) -> np.ndarr
     if len(a) <= step:
         idx = win.base.take(a, axis=0)
         idx += (xy + level * win.plane)[:, None]
-        return win.levels.take(idx).sum(axis=1, dtype=np.int64)
+        # uint32 holds any sum of up to 65537 raster values, and adds up faster than int64
+        return win.levels.take(idx).sum(axis=1, dtype=np.uint32 if n_points <= _UINT32_POINTS else np.int64)
     return np.concatenate([_scores(win, a[i:i + step], xy[i:i + step], level) for i in range(0, len(a), step)])
 
 
