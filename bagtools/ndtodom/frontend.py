@@ -24,12 +24,18 @@ scan, in the robot base frame:
    a junction after a sharp turn) can match a small submap better than the
    place itself. The best normalized NDT score, less the prior's cost (the
    motion model: speed, arcs, and never beyond max speed and turn rate), wins.
-4. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
+4. **Refinement**: when the scene's NDT cells are large (long ranges: cells
+   of 1/sqrt(2) of them are at least ``MIN_REFINE_CELL_M``), NDT refines the
+   winner once more on the keyframe's submap with those finer cells, the next
+   level of a multi-resolution NDT: one grid's discretization no longer
+   decides the last centimetres. A refinement that moves the pose by more than
+   ``REFINE_MAX_M``/``REFINE_MAX_RAD`` is not taken.
+5. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
    counted); an odometry motion the match contradicts beyond its noise is
    counted as a rejected odometry sample; a step faster than the robot could
    move is counted. :meth:`LaserOdometry.warnings` says each kind once, with
    counts.
-5. **Keyframes**: a scan becomes the reference once the robot has moved
+6. **Keyframes**: a scan becomes the reference once the robot has moved
    ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
    or the score fell below ``keyframe_score_ratio`` of the keyframe's first.
 
@@ -70,7 +76,7 @@ PRIOR_WEIGHT_DEFAULT = 0.01
 #: What overruling the odometry costs, in normalized score (see _Prior).
 OUTLIER_COST = 0.25
 #: Without odometry: constant velocity's narrow spread (m, rad, share of the motion), and what overruling it costs.
-CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.08
+CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.12
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
 PRIOR_GATE2 = 14.0
 #: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
@@ -83,6 +89,11 @@ SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
 SEARCH_SIGMAS = 3.0
 MAX_SEARCH_M = 3.0
+#: The refinement's cells are this share of the matching cells (half the area), when at least MIN_REFINE_CELL_M;
+#: it may move the pose by at most REFINE_MAX_M and REFINE_MAX_RAD.
+REFINE_CELL_RATIO = 1.0 / math.sqrt(2.0)
+MIN_REFINE_CELL_M = 0.5
+REFINE_MAX_M, REFINE_MAX_RAD = 0.2, 0.05
 #: The wide search (what the robot can have done) matches against the keyframes within SUBMAP_RADIUS_M, up to this
 #: many: after a sharp turn or a gap the scan may see what only older keyframes saw, and a small submap can match a
 #: repeated scene (a parallel corridor, the mirror image of a junction) better than the place itself.
@@ -101,7 +112,8 @@ class FrontEndOptions:
     else constant velocity). ``search``: allow the grid search. ``reference``:
     "keyframe" or "previous" (every scan is a keyframe). ``wheeled``: the scans
     ride on a wheeled robot, whose steps run along arcs (False for a handheld
-    or flying laser, which can move sideways).
+    or flying laser, which can move sideways). ``refine``: the finer-grid
+    refinement of large-cell scenes (step 4 of the module docstring).
     """
 
     init: str = "auto"
@@ -126,6 +138,7 @@ class FrontEndOptions:
     voxel_m: float = 0.2
     wheeled: bool = True
     max_iterations: int = 100
+    refine: bool = True
 
     def __post_init__(self) -> None:
         if self.init not in ("auto", *GUESSES):
@@ -173,10 +186,20 @@ BASIN_M, BASIN_RAD = 0.15, 0.1
 AGREE_M, AGREE_RAD = 0.05, 0.02
 
 
-def ndt_covariance(hessian: np.ndarray) -> np.ndarray:
-    """Covariance (3,3) of an NDT match from the Hessian of its cost: the inverse on the positive
-    eigenvalues (a degenerate direction gets a large variance), plus :data:`COVARIANCE_FLOOR`."""
+def ndt_covariance(hessian: np.ndarray, prior_information: np.ndarray | None = None) -> np.ndarray:
+    """Covariance (3,3) of an NDT match from the Hessian of its cost and the information of its prior.
+
+    The Hessian's negative eigenvalues (a match that ends on a ridge of the
+    score in some direction) are taken as no information there, not as
+    negative information, so the prior still bounds that direction. The
+    inverse is taken on the positive eigenvalues of the sum (a direction
+    neither constrains gets a large variance), plus :data:`COVARIANCE_FLOOR`.
+    """
     values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
+    information = (vectors * np.maximum(values, 0.0)) @ vectors.T
+    if prior_information is not None:
+        information = information + prior_information
+    values, vectors = np.linalg.eigh(information)
     inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
     return (vectors * inverse) @ vectors.T + COVARIANCE_FLOOR
 
@@ -269,6 +292,7 @@ class _Keyframe:
     first_score: float | None = None
     correlative: CorrelativeReference | None = None
     wide: tuple[NdtReference, CorrelativeReference] | None = None  # the wide search's larger submap, when needed
+    fine: NdtReference | None = None  # the submap on the refinement's finer cells, when needed
 
 
 class LaserOdometry:
@@ -282,6 +306,8 @@ class LaserOdometry:
         self._last_odom: np.ndarray | None = None
         self._velocity = np.zeros(3)  # per second, in the base frame
         self._scores: list[float] = []
+        fine = self.options.cell_size_m * REFINE_CELL_RATIO
+        self._refine_cell_m = fine if self.options.refine and fine >= MIN_REFINE_CELL_M else None
 
     # -- the loop body -------------------------------------------------------------------------
 
@@ -332,6 +358,8 @@ class LaserOdometry:
             self.counts[FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
             best = _Match(_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
+        elif self._refine_cell_m is not None:
+            best = self._refine(full, kf, best)
         pose = _compose(kf.pose, best.pose)
         pose[2] = wrap_to_pi(pose[2])
         self._check(last, pose, dt, prior, best)
@@ -368,7 +396,7 @@ class LaserOdometry:
         result = match_scans(points, reference, initial_pose=initial, max_iterations=self.options.max_iterations,
                              prior=(gaussian.mean, info))
         score = normalized_score(result.score, result.n_points) if result.score > 0 else 0.0
-        return _Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian + info), source)
+        return _Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian, info), source)
 
     def _ndt_from_guesses(self, points: np.ndarray, kf: _Keyframe, guesses: dict[str, np.ndarray],
                           prior: _Prior) -> list[_Match]:
@@ -478,6 +506,16 @@ class LaserOdometry:
             kf.wide = (NdtReference.from_points(points, opts.cell_size_m, opts.cell_model),
                        CorrelativeReference.from_points(points, resolution_m=opts.search_resolution_m))
         return kf.wide
+
+    def _refine(self, points: np.ndarray, kf: _Keyframe, best: _Match) -> _Match:
+        """``best`` refined by NDT on the keyframe's submap with the finer cells (``points``: the whole scan)."""
+        if kf.fine is None:
+            kf.fine = NdtReference.from_points(kf.points, self._refine_cell_m, self.options.cell_model)
+        result = match_scans(points, kf.fine, initial_pose=best.pose, max_iterations=self.options.max_iterations)
+        if result.score <= 0 or not _close(best.pose, np.asarray(result.pose, dtype=np.float64), REFINE_MAX_M,
+                                           REFINE_MAX_RAD):
+            return best
+        return _Match(np.asarray(result.pose, dtype=np.float64), best.score, best.covariance, best.source)
 
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
