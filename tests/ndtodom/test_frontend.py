@@ -81,8 +81,9 @@ def test_csail_with_odometry(csail: Path) -> None:
     the wheels."""
     result = run_front_end(csail / "csail_odom")
     trans, rot = per_scan(result)
-    assert trans.mean() < 0.035 and rot.mean() < 1.0, (trans.mean(), rot.mean())
-    assert np.count_nonzero(trans > 0.2) <= 5
+    assert trans.mean() < 0.032 and rot.mean() < 1.0, (trans.mean(), rot.mean())
+    # Over 0.2 m: steps 364 and 399, where GMapping's reference itself is off (see bench/RESULTS.md)
+    assert np.count_nonzero(trans > 0.2) <= 3
     s = result.summary
     assert s["fallbacks"] <= 4 and s["errors_ndt"]["ape_translation_m"]["rmse"] < 0.25 * \
         s["errors_odometry"]["ape_translation_m"]["rmse"]
@@ -100,8 +101,8 @@ def test_csail_without_odometry_does_not_diverge(csail_scans_run) -> None:
     assert s["fallbacks"] <= 4  # at most 1% of 405 pairs
     # Issue targets: per step at most 3 cm and 1 degree (asserted loosely); the sharp turns after a gap whose mirror
     # image matches as well (steps 52-53) are found by the wide search on a larger submap.
-    assert trans.mean() < 0.035 and rot.mean() < 1.0, (trans.mean(), rot.mean())
-    assert np.count_nonzero(trans > 0.2) <= 4
+    assert trans.mean() < 0.032 and rot.mean() < 1.0, (trans.mean(), rot.mean())
+    assert np.count_nonzero(trans > 0.2) <= 3
 
 
 def test_fast_planar_helpers_equal_the_transforms_module() -> None:

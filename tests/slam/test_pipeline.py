@@ -130,8 +130,10 @@ def test_real_csail_log_without_odometry_is_consistent(csail_odom: Path) -> None
         pytest.skip(f"real bag not available: {bag}")
     result = SlamPipeline(bag, SlamOptions()).run()
     errors = result.summary["errors_slam"]
-    assert errors["ape_aligned_m"]["rmse"] < 0.3, errors["ape_aligned_m"]
-    assert errors["relative_gap_20"]["trans_median_m"] < 0.1, errors["relative_gap_20"]
+    assert errors["ape_aligned_m"]["rmse"] < 0.15, errors["ape_aligned_m"]
+    # the target is a mean of 0.1 m; GMapping's own glitches at scans 42 and 364 weigh about a centimetre of it
+    assert errors["relative_gap_20"]["trans_median_m"] < 0.09, errors["relative_gap_20"]
+    assert errors["relative_gap_20"]["trans_mean_m"] < 0.115, errors["relative_gap_20"]
 
 
 # -- bad input ----------------------------------------------------------------------------------
