@@ -33,7 +33,10 @@ scan, in the robot base frame:
 5. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
    counted); an odometry motion the match contradicts beyond its noise is
    counted as a rejected odometry sample; a step faster than the robot could
-   move is counted. :meth:`LaserOdometry.warnings` says each kind once, with
+   move is counted; a choice between two distinct places (farther apart than
+   NDT's basin) whose scores, less the prior's costs, differ by less than
+   ``AMBIGUOUS_MARGIN`` is counted as ambiguous (a repeating scene, or scans
+   that overlap too little: a wrong choice there is as confident as a right one). :meth:`LaserOdometry.warnings` says each kind once, with
    counts.
 6. **Keyframes**: a scan becomes the reference once the robot has moved
    ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
@@ -63,6 +66,11 @@ SEARCHED = "searched"
 FALLBACK = "fallback"
 ODOM_REJECTED = "odometry_rejected"
 TOO_FAST = "faster_than_robot"
+AMBIGUOUS = "ambiguous"
+#: A step is ambiguous when another place scores within this much of the chosen one (normalized score less the
+#: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
+AMBIGUOUS_MARGIN = 0.05
+AMBIGUOUS_WARN_SHARE = 0.03
 
 
 #: Odometry's noise per step: a floor plus a share of the motion (sd, m and rad).
@@ -354,6 +362,8 @@ class LaserOdometry:
                 else:  # no odometry: the scene must decide, on more of it
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
+        if self._ambiguous(matches, best, prior):
+            self.counts[AMBIGUOUS] += 1
         if best.score < opts.min_score:
             self.counts[FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
@@ -436,6 +446,12 @@ class LaserOdometry:
         sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))
         return _Prior(_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
+
+    @staticmethod
+    def _ambiguous(matches: list[_Match], best: _Match, prior: _Prior) -> bool:
+        """Another place (outside ``best``'s basin) is nearly as good as ``best`` (see AMBIGUOUS_MARGIN)."""
+        rivals = [prior.objective(m) for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
+        return bool(rivals) and prior.objective(best) - max(rivals) < AMBIGUOUS_MARGIN
 
     def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
         """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
@@ -569,6 +585,10 @@ class LaserOdometry:
         if self.counts[ODOM_REJECTED]:
             out.append(f"{self.counts[ODOM_REJECTED]} odometry step(s) contradicted by the scan match beyond the "
                        "odometry's noise (corrupt or slipping samples) were not followed")
+        if self.counts[AMBIGUOUS] >= max(3, AMBIGUOUS_WARN_SHARE * pairs):
+            out.append(f"{self.counts[AMBIGUOUS]} of {pairs} scan pairs on {topic} matched two places almost equally "
+                       "well (a repeating scene, or scans that overlap too little): the trajectory may be wrong there; "
+                       "wheel odometry or scans closer together would settle it")
         if self.counts[TOO_FAST]:
             out.append(f"{self.counts[TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
                        "the robot can move: check the scans there")
@@ -578,6 +598,7 @@ class LaserOdometry:
         pairs = max(len(self.run.steps) - 1, 0)
         return {"pairs": pairs, "searched": self.counts[SEARCHED], "fallbacks": self.counts[FALLBACK],
                 "odometry_rejected": self.counts[ODOM_REJECTED], "faster_than_robot": self.counts[TOO_FAST],
+                "ambiguous": self.counts[AMBIGUOUS],
                 "keyframes": len(self.run.keyframe_indexes)}
 
 

@@ -188,3 +188,20 @@ def test_csail_without_odometry_holds_from_other_first_scans(csail_scans_run, fi
     err = step_errors(front.run.poses(), tform2pose(truth.poses[at]))
     wrong = np.flatnonzero((np.hypot(err[:, 0], err[:, 1]) > 0.5) | (np.abs(err[:, 2]) > np.radians(30.0))) + first
     assert wrong.size == 0, wrong
+
+
+def test_csail_half_the_scans_without_odometry_warns_of_ambiguous_matches(csail_scans_run) -> None:
+    """Every other scan (2 m and up to 130 degrees apart, with a 180-degree laser): many steps could be either of
+    two places, and the run says so; at the log's own rate it does not."""
+    from bagtools.ndtodom.frontend import cell_size_for
+
+    assert not any("almost equally well" in w for w in csail_scans_run.summary["warnings"])
+    assert csail_scans_run.summary["ambiguous"] <= 8
+    steps = csail_scans_run.front_end.steps[::2]
+    front = LaserOdometry(NdtOdomOptions(use_odometry=False).front_end(cell_size_for([s.points_base for s in steps])))
+    for step in steps:
+        front.register(step.stamp_ns, step.points_base, None)
+    counts = front.summary_counts()
+    assert counts["ambiguous"] >= 0.05 * counts["pairs"], counts
+    assert any(f"{counts['ambiguous']} of {counts['pairs']} scan pairs on the scans matched two places almost equally "
+               "well" in w for w in front.warnings()), front.warnings()
