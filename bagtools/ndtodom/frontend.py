@@ -36,8 +36,8 @@ scan, in the robot base frame:
    move is counted; a choice between two distinct places (farther apart than
    NDT's basin) whose scores, less the prior's costs, differ by less than
    ``AMBIGUOUS_MARGIN`` is counted as ambiguous (a repeating scene, or scans
-   that overlap too little: a wrong choice there is as confident as a right one). :meth:`LaserOdometry.warnings` says each kind once, with
-   counts.
+   that overlap too little: a wrong choice there is as confident as a right
+   one). :meth:`LaserOdometry.warnings` says each kind once, with counts.
 6. **Keyframes**: a scan becomes the reference once the robot has moved
    ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
    or the score fell below ``keyframe_score_ratio`` of the keyframe's first.
@@ -528,10 +528,10 @@ class LaserOdometry:
         if kf.fine is None:
             kf.fine = NdtReference.from_points(kf.points, self._refine_cell_m, self.options.cell_model)
         result = match_scans(points, kf.fine, initial_pose=best.pose, max_iterations=self.options.max_iterations)
-        if result.score <= 0 or not _close(best.pose, np.asarray(result.pose, dtype=np.float64), REFINE_MAX_M,
-                                           REFINE_MAX_RAD):
+        pose = np.asarray(result.pose, dtype=np.float64)
+        if result.score <= 0 or not _close(best.pose, pose, REFINE_MAX_M, REFINE_MAX_RAD):
             return best
-        return _Match(np.asarray(result.pose, dtype=np.float64), best.score, best.covariance, best.source)
+        return _Match(pose, best.score, best.covariance, best.source)
 
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
