@@ -119,8 +119,13 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
     ok = (at1 >= 0) & (at2 >= 0)
     out.update(used=int(ok.sum()), missing=int((~ok).sum()))
     if not ok.any():
+        stamps = np.concatenate([relations.first_ns, relations.second_ns])
+        at = np.searchsorted(estimate.stamps_ns, stamps)
+        above, below = (estimate.stamps_ns[np.clip(i, 0, len(estimate) - 1)] for i in (at, at - 1))
+        gap_ns = np.minimum(np.abs(above - stamps), np.abs(below - stamps))
         return {**out, "unavailable": f"no relation has poses of the trajectory at both stamps (within "
-                                      f"{max_diff_ns / 1e9:g} s)"}
+                                      f"{max_diff_ns / 1e9:g} s; the nearest pose is {gap_ns.min() / 1e9:.3f} s "
+                                      "from a relation's stamp: were the scans stamped with another clock?)"}
     poses = tform2pose(estimate.poses).reshape(-1, 3)
     moved = se2_between(poses[at1[ok]], poses[at2[ok]]).reshape(-1, 3)
     error = se2_between(relations.motion[ok], moved).reshape(-1, 3)

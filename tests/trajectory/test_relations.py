@@ -82,7 +82,8 @@ def test_relations_without_poses_are_counted_not_guessed() -> None:
     assert scored["relations"] == 2 and scored["used"] == 1 and scored["missing"] == 1
     later = Relations(rel.first_ns + 10**12, rel.second_ns + 10**12, rel.motion)
     none = relation_errors(later, truth)
-    assert none["used"] == 0 and "unavailable" in none and "trans_mean_m" not in none
+    assert none["used"] == 0 and "trans_mean_m" not in none
+    assert "the nearest pose is 997.100 s from a relation's stamp" in none["unavailable"], none["unavailable"]
 
 
 @pytest.mark.parametrize("text,message", [
@@ -105,3 +106,10 @@ def test_a_missing_file_names_it(tmp_path: Path) -> None:
     with pytest.raises(BagtoolsError, match="cannot read the relations file") as err:
         read_relations(tmp_path / "none.relations")
     assert "none.relations" in str(err.value)
+
+
+def test_a_single_pose_trajectory_scores_nothing_and_says_why() -> None:
+    one = _trajectory(np.zeros((1, 3)))
+    rel = Relations(np.array([T0_NS + 5_000_000_000]), np.array([T0_NS + 6_000_000_000]), np.zeros((1, 3)))
+    scored = relation_errors(rel, one)
+    assert scored["used"] == 0 and "the nearest pose is 5.000 s" in scored["unavailable"]
