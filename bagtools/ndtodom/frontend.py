@@ -37,7 +37,9 @@ scan, in the robot base frame:
    NDT's basin) whose scores, less the prior's costs, differ by less than
    ``AMBIGUOUS_MARGIN`` is counted as ambiguous (a repeating scene, or scans
    that overlap too little: a wrong choice there is as confident as a right
-   one). :meth:`LaserOdometry.warnings` says each kind once, with counts.
+   one), and its covariance widened by ``AMBIGUOUS_COVARIANCE`` so that a pose
+   graph can bend there. :meth:`LaserOdometry.warnings` says each kind once,
+   with counts.
 6. **Keyframes**: a scan becomes the reference once the robot has moved
    ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
    or the score fell below ``keyframe_score_ratio`` of the keyframe's first.
@@ -71,6 +73,9 @@ AMBIGUOUS = "ambiguous"
 #: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
 AMBIGUOUS_MARGIN = 0.05
 AMBIGUOUS_WARN_SHARE = 0.03
+#: Added to an ambiguous step's covariance (m^2, m^2, rad^2): the other place may be the right one, and a pose
+#: graph built on the steps must be free to bend there (and to search loops across it widely).
+AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
 
 
 #: Odometry's noise per step: a floor plus a share of the motion (sd, m and rad).
@@ -362,7 +367,8 @@ class LaserOdometry:
                 else:  # no odometry: the scene must decide, on more of it
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
-        if self._ambiguous(matches, best, prior):
+        ambiguous = self._ambiguous(matches, best, prior)
+        if ambiguous:
             self.counts[AMBIGUOUS] += 1
         if best.score < opts.min_score:
             self.counts[FALLBACK] += 1
@@ -377,7 +383,9 @@ class LaserOdometry:
             self._velocity = _between(last.pose, pose) / dt
             self._scores.append(best.score)
         keyframe = self._is_new_keyframe(best)
-        step = ScanStep(stamp_ns, pose, full, kf.index, best.pose, best.covariance, best.score, best.source, keyframe)
+        covariance = best.covariance + AMBIGUOUS_COVARIANCE if ambiguous else best.covariance
+        step = ScanStep(stamp_ns, pose, full, kf.index, best.pose, covariance, best.score, best.source, keyframe,
+                        ambiguous)
         if keyframe:
             self._new_keyframe(len(self.run.steps), pose, full)
         return step

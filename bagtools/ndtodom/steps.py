@@ -32,6 +32,9 @@ class ScanStep:
         source: how the pose was found: "first", "ndt" (from the best guess), "search" (a grid search
             seeded NDT), or "fallback" (no match could be trusted: the guess was kept).
         keyframe: this scan became the reference for the scans after it.
+        ambiguous: another place, outside NDT's basin, matched almost as well (see
+            :data:`bagtools.ndtodom.frontend.AMBIGUOUS_MARGIN`): the step may be wrong, and its
+            ``covariance`` says so (:data:`bagtools.ndtodom.frontend.AMBIGUOUS_COVARIANCE` added).
     """
 
     stamp_ns: int
@@ -43,6 +46,7 @@ class ScanStep:
     score: float
     source: str
     keyframe: bool
+    ambiguous: bool = False
 
 
 @dataclass

@@ -23,7 +23,9 @@ is optimized once more (with the same outlier check).
 
 Graph distances (for the search's uncertainty) are shortest paths through the
 graph (``scipy.sparse.csgraph.dijkstra``): an odometry edge weighs its length
-plus ``turn_m_per_rad`` per radian turned, a loop edge ``loop_edge_m``.
+plus ``turn_m_per_rad`` per radian turned (plus, for a loose edge the front
+end is unsure of, the path over which the drift model reaches its
+uncertainty), a loop edge ``loop_edge_m``.
 """
 
 from __future__ import annotations
@@ -46,6 +48,9 @@ from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 #: Covariance of the motion between two keyframes the front end did not link (m^2, m^2, rad^2): unknown.
 UNLINKED_COVARIANCE = np.diag([1.0, 1.0, 0.3])
+#: An odometry edge whose standard deviation exceeds these (m, rad) is loose (an ambiguous step, an unlinked
+#: keyframe): in graph distance it weighs the path over which the drift model reaches that uncertainty.
+LOOSE_EDGE_M, LOOSE_EDGE_RAD = 0.1, 0.1
 #: chi2 of 3 degrees of freedom at 99.9 %, and its median.
 CHI2_3DOF_999 = 16.27
 CHI2_3DOF_MEDIAN = 2.366
@@ -170,8 +175,13 @@ class _Builder:
         o = self.options.loop
         if c.kind == LOOP:
             return o.loop_edge_m
-        # a zero weight would read as no edge
-        return max(float(np.hypot(c.T_i_j[0], c.T_i_j[1]) + o.turn_m_per_rad * abs(c.T_i_j[2])), 1e-6)
+        length = float(np.hypot(c.T_i_j[0], c.T_i_j[1]) + o.turn_m_per_rad * abs(c.T_i_j[2]))
+        sd = np.sqrt(np.diag(c.covariance))
+        if max(sd[0], sd[1]) > LOOSE_EDGE_M or sd[2] > LOOSE_EDGE_RAD:
+            # an edge the front end is unsure of (an ambiguous step, an unlinked keyframe) is as uncertain as
+            # this much path: loops across it are searched in windows that cover it
+            length += max(max(sd[0], sd[1]) / o.drift_per_m, sd[2] / o.drift_rad_per_m)
+        return max(length, 1e-6)  # a zero weight would read as no edge
 
     def _graph_distance(self, node: int) -> np.ndarray:
         """Graph distance (m) from ``node`` to every node (see the module docstring)."""
