@@ -22,8 +22,14 @@ scan, in the robot base frame:
    correlative peak (:func:`~bagtools.ndt.match_scans_grid_peaks`) on a larger
    submap, since a scene that repeats (a parallel corridor, the mirror image of
    a junction after a sharp turn) can match a small submap better than the
-   place itself. The best normalized NDT score, less the prior's cost (the
-   motion model: speed, arcs, and never beyond max speed and turn rate), wins.
+   place itself; without odometry, a time step longer than ``max_gap_s``
+   searches that window too (constant velocity says little after seconds).
+   The best normalized NDT score, less the prior's cost (the motion model:
+   speed, arcs, and never beyond max speed and turn rate), wins, unless a
+   match in another place comes within ``CONTEST_MARGIN`` of it: then each is
+   scored on the submap as a fine likelihood field (``match_scans_grid`` at
+   ``FINE_SCORE_RESOLUTION_M``), less what the robot's reach makes of it, and
+   a margin of ``AMBIGUOUS_MARGIN`` on that score decides.
 4. **Refinement**: when the scene's NDT cells are large (long ranges: cells
    of 1/sqrt(2) of them are at least ``MIN_REFINE_CELL_M``), NDT refines the
    winner once more on the keyframe's submap with those finer cells, the next
@@ -34,7 +40,7 @@ scan, in the robot base frame:
    counted); an odometry motion the match contradicts beyond its noise is
    counted as a rejected odometry sample; a step faster than the robot could
    move is counted; a choice between two distinct places (farther apart than
-   NDT's basin) whose scores, less the prior's costs, differ by less than
+   NDT's basin) that even the fine score tells apart by less than
    ``AMBIGUOUS_MARGIN`` is counted as ambiguous (a repeating scene, or scans
    that overlap too little: a wrong choice there is as confident as a right
    one), and its covariance widened by ``AMBIGUOUS_COVARIANCE`` so that a pose
@@ -73,6 +79,14 @@ AMBIGUOUS = "ambiguous"
 #: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
 AMBIGUOUS_MARGIN = 0.05
 AMBIGUOUS_WARN_SHARE = 0.03
+#: Candidates in distinct places whose objectives are within CONTEST_MARGIN of the best are decided on a finer
+#: grid: each is scored as a likelihood field of the keyframe's submap at FINE_SCORE_RESOLUTION_M (the best pose
+#: within FINE_SCORE_WINDOW of it), less the cost of the motion under what the robot can do (the prior's wide
+#: part: the narrow part's preference already shortlisted them). Coarse NDT cells blur what tells a sharp turn or
+#: a half-seen room or a corridor's doors from a look-alike; a fine grid does not.
+CONTEST_MARGIN = 0.1
+FINE_SCORE_RESOLUTION_M = 0.05
+FINE_SCORE_WINDOW = (0.1, 0.1, 0.02)
 #: Added to an ambiguous step's covariance (m^2, m^2, rad^2): the other place may be the right one, and a pose
 #: graph built on the steps must be free to bend there (and to search loops across it widely).
 AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
@@ -306,6 +320,7 @@ class _Keyframe:
     correlative: CorrelativeReference | None = None
     wide: tuple[NdtReference, CorrelativeReference] | None = None  # the wide search's larger submap, when needed
     fine: NdtReference | None = None  # the submap on the refinement's finer cells, when needed
+    fine_field: CorrelativeReference | None = None  # the submap as a fine likelihood field, to decide contests
 
 
 class LaserOdometry:
@@ -359,7 +374,8 @@ class LaserOdometry:
             if searched is not None:
                 matches.append(searched)
                 best = max(matches, key=prior.objective)
-            if best.score < self._trust_score() and prior.wide is not None:
+            gap = dt > opts.max_gap_s and prior.kind != "odometry"
+            if (best.score < self._trust_score() or gap) and prior.wide is not None:
                 # The guess may be what is wrong: search what the robot can have done instead.
                 if prior.kind == "odometry":  # rarely wrong: its best alternative on the submap is enough
                     searched = self._search(points, kf, prior.wide, dt)
@@ -367,7 +383,7 @@ class LaserOdometry:
                 else:  # no odometry: the scene must decide, on more of it
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
-        ambiguous = self._ambiguous(matches, best, prior)
+        best, ambiguous = self._decide(full, kf, matches, best, prior)
         if ambiguous:
             self.counts[AMBIGUOUS] += 1
         if best.score < opts.min_score:
@@ -455,11 +471,38 @@ class LaserOdometry:
         return _Prior(_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
-    @staticmethod
-    def _ambiguous(matches: list[_Match], best: _Match, prior: _Prior) -> bool:
-        """Another place (outside ``best``'s basin) is nearly as good as ``best`` (see AMBIGUOUS_MARGIN)."""
-        rivals = [prior.objective(m) for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
-        return bool(rivals) and prior.objective(best) - max(rivals) < AMBIGUOUS_MARGIN
+    def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[_Match], best: _Match,
+                prior: _Prior) -> tuple[_Match, bool]:
+        """(the winner, whether the step is ambiguous): ``best``, unless a match in another place is within
+        CONTEST_MARGIN of it; then the finer grid's score less the prior's cost decides between them
+        (``points``: the whole scan), when it tells them apart by AMBIGUOUS_MARGIN; when it does not either,
+        ``best`` stays and the step is ambiguous."""
+        rivals = [m for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
+        if not rivals:
+            return best, False
+        runner_up = max(prior.objective(m) for m in rivals)
+        if prior.objective(best) - runner_up >= CONTEST_MARGIN:
+            return best, False
+        contenders = [best]
+        for m in sorted(rivals, key=prior.objective, reverse=True):
+            if prior.objective(best) - prior.objective(m) < CONTEST_MARGIN and \
+                    not any(_close(m.pose, c.pose, BASIN_M, BASIN_RAD) for c in contenders):
+                contenders.append(m)
+        reach = prior.wide or prior  # what the robot can have done; the prior's preference shortlisted them
+        fine = [self._fine_score(points, kf, m.pose) - reach.weight * reach.cost(m.pose) for m in contenders]
+        order = np.argsort(fine)[::-1]
+        if fine[order[0]] - fine[order[1]] < AMBIGUOUS_MARGIN:  # the finer grid cannot tell them apart either
+            return best, True
+        return contenders[order[0]], False
+
+    def _fine_score(self, points: np.ndarray, kf: _Keyframe, pose: np.ndarray) -> float:
+        """The best likelihood-field score (in [0, 1]) of ``points`` on the keyframe's submap at
+        FINE_SCORE_RESOLUTION_M, within FINE_SCORE_WINDOW of ``pose``."""
+        if kf.fine_field is None:
+            kf.fine_field = CorrelativeReference.from_points(kf.points, resolution_m=FINE_SCORE_RESOLUTION_M)
+        grid = match_scans_grid(points, kf.fine_field, initial_pose=pose, search_range=FINE_SCORE_WINDOW,
+                                angular_resolution_rad=self.options.search_angular_resolution_rad)
+        return grid.score if grid.ok else 0.0
 
     def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
         """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
