@@ -75,6 +75,7 @@ FALLBACK = "fallback"
 ODOM_REJECTED = "odometry_rejected"
 TOO_FAST = "faster_than_robot"
 AMBIGUOUS = "ambiguous"
+BEYOND_REACH = "beyond_reach"
 #: A step is ambiguous when another place scores within this much of the chosen one (normalized score less the
 #: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
 AMBIGUOUS_MARGIN = 0.05
@@ -111,6 +112,10 @@ LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
 #: Beyond what the robot can do in a step (max speed and turn rate x time), the prior's cost grows by one per
 #: this much more (m, rad).
 REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
+#: A scan's stamp may be off by this much (s): what the robot can do in a step (its reach, the search window) is
+#: reckoned over the time step plus this, so that a late or early stamp (a driver's, or a log resampled from
+#: another clock) does not rule out the true motion.
+STAMP_JITTER_S = 0.25
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
@@ -129,6 +134,11 @@ WIDE_SUBMAP_KEYFRAMES = 15
 WIDE_PEAKS, WIDE_PEAK_RATIO = 8, 0.6
 #: A peak whose prior cost (weighted, in normalized score) exceeds this could not win: it is not refined.
 WIDE_MAX_PRIOR_COST = 0.5
+#: Without odometry, when every match within reach scores below the trust score, the largest window (MAX_SEARCH_M, any heading)
+#: is searched with no reach at all: a stamp can be wrong (a log resampled from another clock puts 0.15 s on a
+#: 30-degree turn) or the robot carried. A match there is taken when it scores at least the trust score and
+#: BEYOND_REACH_GAIN more than the best within reach.
+BEYOND_REACH_GAIN = 0.2
 
 
 @dataclass(frozen=True)
@@ -383,7 +393,14 @@ class LaserOdometry:
                 else:  # no odometry: the scene must decide, on more of it
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
-        best, ambiguous = self._decide(full, kf, matches, best, prior)
+        beyond = None
+        if opts.search and prior.kind != "odometry" and best.score < self._trust_score():
+            beyond = self._search_beyond_reach(points, kf, prior, best)
+        if beyond is not None:
+            self.counts[BEYOND_REACH] += 1
+            best, ambiguous = beyond, False
+        else:
+            best, ambiguous = self._decide(full, kf, matches, best, prior)
         if ambiguous:
             self.counts[AMBIGUOUS] += 1
         if best.score < opts.min_score:
@@ -447,6 +464,7 @@ class LaserOdometry:
         """Where the scan should be before matching: the odometry's motion (its noise grows with the motion),
         else constant velocity (its uncertainty grows with the time step: the robot may have changed its speed)."""
         opts = self.options
+        reach_s = dt + STAMP_JITTER_S
         motion = _between(last_pose, guesses["constant-velocity"])
         sd_xy = CV_NOISE_M + 0.5 * opts.max_accel_mps2 * dt * dt + CV_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
@@ -454,7 +472,7 @@ class LaserOdometry:
         origin = last if opts.wheeled else None
         kinematic = _Prior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
                            opts.prior_weight, origin=origin,
-                           reach=(last, opts.max_speed_mps * dt, opts.max_turn_rate_radps * dt))
+                           reach=(last, opts.max_speed_mps * reach_s, opts.max_turn_rate_radps * reach_s))
         if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
             return kinematic
         if "odom" not in guesses:
@@ -527,8 +545,9 @@ class LaserOdometry:
     def _search_window(self, prior: _Prior, dt: float) -> tuple[float, float, float]:
         """The prior's 3-sigma window (x_m, y_m, theta_rad), within what the robot can do in ``dt``."""
         opts = self.options
-        half_xy = float(np.clip(SEARCH_SIGMAS * prior.sd[0], 0.2, min(opts.max_speed_mps * dt + 0.2, MAX_SEARCH_M)))
-        half_theta = float(np.clip(SEARCH_SIGMAS * prior.sd[2], 0.1, min(opts.max_turn_rate_radps * dt + 0.1, math.pi)))
+        reach_s = dt + STAMP_JITTER_S
+        half_xy = float(np.clip(SEARCH_SIGMAS * prior.sd[0], 0.2, min(opts.max_speed_mps * reach_s, MAX_SEARCH_M)))
+        half_theta = float(np.clip(SEARCH_SIGMAS * prior.sd[2], 0.1, min(opts.max_turn_rate_radps * reach_s, math.pi)))
         return half_xy, half_xy, half_theta
 
     def _search(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float) -> _Match | None:
@@ -563,6 +582,22 @@ class LaserOdometry:
                 continue
             refined.append(self._ndt(points, ndt, initial, source, prior))
         return refined
+
+    def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, best: _Match) -> _Match | None:
+        """The best match in the largest window around the prior's mean, on the larger submap, with no reach and
+        no preference (see BEYOND_REACH_GAIN); None when none scores well enough to be believed."""
+        opts = self.options
+        ndt, correlative = self._wide_reference(kf)
+        free = _Prior(prior.mean, np.array([MAX_SEARCH_M, MAX_SEARCH_M, math.pi]), opts.prior_weight)
+        peaks = match_scans_grid_peaks(points, correlative, initial_pose=prior.mean,
+                                       search_range=(MAX_SEARCH_M, MAX_SEARCH_M, math.pi),
+                                       angular_resolution_rad=opts.search_angular_resolution_rad,
+                                       max_peaks=WIDE_PEAKS, min_ratio=WIDE_PEAK_RATIO)
+        found = [self._ndt(points, ndt, np.asarray(p.pose, dtype=np.float64), "search", free) for p in peaks]
+        winner = max(found, key=lambda m: m.score, default=None)
+        if winner is None or winner.score < max(self._trust_score(), best.score + BEYOND_REACH_GAIN):
+            return None
+        return winner
 
     def _wide_reference(self, kf: _Keyframe) -> tuple[NdtReference, CorrelativeReference]:
         """The keyframe's larger submap (built once): its own and up to WIDE_SUBMAP_KEYFRAMES - 1 earlier ones."""
@@ -640,6 +675,9 @@ class LaserOdometry:
             out.append(f"{self.counts[AMBIGUOUS]} of {pairs} scan pairs on {topic} matched two places almost equally "
                        "well (a repeating scene, or scans that overlap too little): the trajectory may be wrong there; "
                        "wheel odometry or scans closer together would settle it")
+        if self.counts[BEYOND_REACH]:
+            out.append(f"{self.counts[BEYOND_REACH]} scan(s) on {topic} matched only beyond what the robot can do in "
+                       "their time step (a wrong stamp, or the robot carried) and were placed there")
         if self.counts[TOO_FAST]:
             out.append(f"{self.counts[TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
                        "the robot can move: check the scans there")
@@ -649,7 +687,7 @@ class LaserOdometry:
         pairs = max(len(self.run.steps) - 1, 0)
         return {"pairs": pairs, "searched": self.counts[SEARCHED], "fallbacks": self.counts[FALLBACK],
                 "odometry_rejected": self.counts[ODOM_REJECTED], "faster_than_robot": self.counts[TOO_FAST],
-                "ambiguous": self.counts[AMBIGUOUS],
+                "ambiguous": self.counts[AMBIGUOUS], "beyond_reach": self.counts[BEYOND_REACH],
                 "keyframes": len(self.run.keyframe_indexes)}
 
 
