@@ -104,7 +104,10 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
     """The relations metric of ``estimate`` (see the module docstring) as a dict for summary.json.
 
     Keys: ``relations`` (in the file), ``used``, ``missing`` (no pose at a
-    stamp), ``trans_mean_m``, ``trans_std_m``, ``trans_sq_mean_m2``,
+    stamp), ``same_pose`` (both stamps at one pose: closer together than the
+    tolerance, as a few of the Intel log's are, 6 ms apart for a 0.35 m
+    motion; scoring them would score the relation against no motion),
+    ``trans_mean_m``, ``trans_std_m``, ``trans_sq_mean_m2``,
     ``trans_max_m``, ``rot_mean_deg``, ``rot_std_deg``, ``rot_sq_mean_deg2``;
     with no relation usable, only the counts and ``unavailable``.
     """
@@ -116,8 +119,12 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
     at1 = np.full(len(relations), -1, dtype=np.int64)
     at2 = np.full(len(relations), -1, dtype=np.int64)
     at1[i1], at2[i2] = j1, j2
-    ok = (at1 >= 0) & (at2 >= 0)
-    out.update(used=int(ok.sum()), missing=int((~ok).sum()))
+    found = (at1 >= 0) & (at2 >= 0)
+    same = found & (at1 == at2) & (relations.first_ns != relations.second_ns)
+    ok = found & ~same
+    out.update(used=int(ok.sum()), missing=int((~found).sum()), same_pose=int(same.sum()))
+    if found.any() and not ok.any():
+        return {**out, "unavailable": "every relation found has both stamps at one pose of the trajectory"}
     if not ok.any():
         stamps = np.concatenate([relations.first_ns, relations.second_ns])
         at = np.searchsorted(estimate.stamps_ns, stamps)

@@ -86,6 +86,20 @@ def test_relations_without_poses_are_counted_not_guessed() -> None:
     assert "the nearest pose is 997.100 s from a relation's stamp" in none["unavailable"], none["unavailable"]
 
 
+def test_relations_whose_stamps_meet_one_pose_are_counted_not_scored_as_no_motion() -> None:
+    """The Intel log's relations include pairs of stamps 6 ms apart for a 0.35 m motion: both meet the same scan,
+    and scoring the relation against that pose's motion to itself (none) would add its whole length as error."""
+    truth = _trajectory(_path())
+    rel = relations_from_trajectory(truth, np.array([[0, 1], [4, 5]]))
+    close = Relations(rel.first_ns, rel.second_ns.copy(), rel.motion)
+    close.second_ns[1] = close.first_ns[1] + 6_000_000  # 6 ms after the first stamp: the same pose
+    scored = relation_errors(close, truth)
+    assert scored["used"] == 1 and scored["same_pose"] == 1 and scored["missing"] == 0
+    assert scored["trans_max_m"] < 1e-9
+    only = relation_errors(Relations(close.first_ns[1:], close.second_ns[1:], close.motion[1:]), truth)
+    assert only["used"] == 0 and "both stamps at one pose" in only["unavailable"]
+
+
 @pytest.mark.parametrize("text,message", [
     ("", "holds no relation"),
     ("# only a comment\n", "holds no relation"),
