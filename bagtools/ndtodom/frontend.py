@@ -134,10 +134,12 @@ WIDE_SUBMAP_KEYFRAMES = 15
 WIDE_PEAKS, WIDE_PEAK_RATIO = 8, 0.6
 #: A peak whose prior cost (weighted, in normalized score) exceeds this could not win: it is not refined.
 WIDE_MAX_PRIOR_COST = 0.5
-#: Without odometry, when every match within reach scores below the trust score, the largest window (MAX_SEARCH_M, any heading)
-#: is searched with no reach at all: a stamp can be wrong (a log resampled from another clock puts 0.15 s on a
-#: 30-degree turn) or the robot carried. A match there is taken when it scores at least the trust score and
+#: Without odometry, when every match within reach scores below the trust score and the time step is shorter
+#: than SHORT_STEP_RATIO of the recent typical one (its stamp is suspect: a log resampled from another clock puts
+#: 0.15 s on a 30-degree turn), the largest window (MAX_SEARCH_M, any heading, around the previous pose) is
+#: searched with no reach at all. A match there is taken when it scores at least the trust score and
 #: BEYOND_REACH_GAIN more than the best within reach.
+SHORT_STEP_RATIO = 0.25
 BEYOND_REACH_GAIN = 0.2
 
 
@@ -344,6 +346,8 @@ class LaserOdometry:
         self._last_odom: np.ndarray | None = None
         self._velocity = np.zeros(3)  # per second, in the base frame
         self._scores: list[float] = []
+        self._steps_s: list[float] = []
+        self._after_short_step = False
         fine = self.options.cell_size_m * REFINE_CELL_RATIO
         self._refine_cell_m = fine if self.options.refine and fine >= MIN_REFINE_CELL_M else None
 
@@ -394,8 +398,12 @@ class LaserOdometry:
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
         beyond = None
-        if opts.search and prior.kind != "odometry" and best.score < self._trust_score():
-            beyond = self._search_beyond_reach(points, kf, prior, best)
+        suspect = self._short_step(dt)
+        if opts.search and prior.kind != "odometry" and best.score < self._trust_score() and \
+                (suspect or self._after_short_step):  # the speed that made the guess came from a suspect stamp
+            beyond = self._search_beyond_reach(points, kf, _between(kf.pose, last.pose), best)
+        self._steps_s.append(dt)
+        self._after_short_step = suspect
         if beyond is not None:
             self.counts[BEYOND_REACH] += 1
             best, ambiguous = beyond, False
@@ -413,7 +421,10 @@ class LaserOdometry:
         pose[2] = wrap_to_pi(pose[2])
         self._check(last, pose, dt, prior, best)
         if best.source != "fallback":
-            self._velocity = _between(last.pose, pose) / dt
+            velocity = _between(last.pose, pose) / dt  # never beyond what the robot can do (a stamp may be off)
+            velocity[:2] *= min(1.0, opts.max_speed_mps / max(float(np.hypot(velocity[0], velocity[1])), 1e-12))
+            velocity[2] = float(np.clip(velocity[2], -opts.max_turn_rate_radps, opts.max_turn_rate_radps))
+            self._velocity = velocity
             self._scores.append(best.score)
         keyframe = self._is_new_keyframe(best)
         covariance = best.covariance + AMBIGUOUS_COVARIANCE if ambiguous else best.covariance
@@ -583,13 +594,19 @@ class LaserOdometry:
             refined.append(self._ndt(points, ndt, initial, source, prior))
         return refined
 
-    def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, best: _Match) -> _Match | None:
-        """The best match in the largest window around the prior's mean, on the larger submap, with no reach and
-        no preference (see BEYOND_REACH_GAIN); None when none scores well enough to be believed."""
+    def _short_step(self, dt: float) -> bool:
+        """A time step under SHORT_STEP_RATIO of the recent typical one: its stamp is suspect."""
+        recent = self._steps_s[-20:]
+        return bool(recent) and dt < SHORT_STEP_RATIO * float(np.median(recent))
+
+    def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, last: np.ndarray, best: _Match) -> _Match | None:
+        """The best match in the largest window around ``last`` (the previous scan's pose in the keyframe's frame:
+        no motion, as nothing else is known), on the larger submap, with no reach and no preference (see
+        BEYOND_REACH_GAIN); None when none scores well enough to be believed."""
         opts = self.options
         ndt, correlative = self._wide_reference(kf)
-        free = _Prior(prior.mean, np.array([MAX_SEARCH_M, MAX_SEARCH_M, math.pi]), opts.prior_weight)
-        peaks = match_scans_grid_peaks(points, correlative, initial_pose=prior.mean,
+        free = _Prior(last, np.array([MAX_SEARCH_M, MAX_SEARCH_M, math.pi]), opts.prior_weight)
+        peaks = match_scans_grid_peaks(points, correlative, initial_pose=last,
                                        search_range=(MAX_SEARCH_M, MAX_SEARCH_M, math.pi),
                                        angular_resolution_rad=opts.search_angular_resolution_rad,
                                        max_peaks=WIDE_PEAKS, min_ratio=WIDE_PEAK_RATIO)
