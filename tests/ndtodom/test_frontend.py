@@ -45,6 +45,34 @@ def test_scans_far_apart_without_odometry_are_found_by_the_search(lap) -> None:
     assert front.warnings() == []
 
 
+@pytest.mark.parametrize("enabled", [True, False])
+def test_a_suspect_stamp_is_searched_beyond_reach(lap, monkeypatch, enabled: bool) -> None:
+    """Scans 2 s apart (up to 0.5 m and 1 rad), no odometry, one stamped 20 ms after the scan before it (a log
+    resampled from another clock): within what the robot can do in 20 ms nothing matches; the search beyond reach
+    places the scan right, counts and says it. Without it (enabled=False) the step is wrong."""
+    import bagtools.ndtodom.frontend as frontend
+
+    if not enabled:
+        monkeypatch.setattr(frontend, "SHORT_STEP_RATIO", 0.0)
+    steps, truth = lap
+    keep = np.arange(0, len(steps), 10)
+    stamps = np.array([steps[k].stamp_ns for k in keep])
+    bad = 6
+    stamps[bad] = stamps[bad - 1] + 20_000_000
+    front = LaserOdometry(FrontEndOptions(cell_size_m=0.5, voxel_m=0.1))
+    for k, stamp in zip(keep, stamps):
+        front.register(int(stamp), steps[k].points_base, None)
+    err = step_errors(front.run.poses(), truth[keep])
+    moved = se2_between(truth[keep[bad - 1]], truth[keep[bad]])
+    assert np.hypot(moved[0], moved[1]) > 0.4 or abs(moved[2]) > 0.6, moved  # beyond 20 ms (+ jitter) of reach
+    worst = max(np.hypot(err[:, 0], err[:, 1]).max(), np.abs(err[:, 2]).max())
+    if enabled:
+        assert front.counts["beyond_reach"] >= 1 and worst < 0.03, (front.counts, worst)
+        assert any("beyond what the robot can do" in w for w in front.warnings()), front.warnings()
+    else:
+        assert front.counts["beyond_reach"] == 0 and worst > 0.1, worst
+
+
 def test_odometry_that_slips_is_rejected_and_said(lap) -> None:
     steps, truth = lap
     keep = np.arange(len(steps))
