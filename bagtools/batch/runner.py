@@ -158,8 +158,10 @@ class BatchRun:
             # Dask samples every task's stack for the dashboard's profile page: 5 % of a bag's time, so only with one.
             stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": bokeh}))
             with sigint_ignored():
+                # CRITICAL: a worker whose scheduler went first (Ctrl-C) logs its failed heartbeat as an ERROR
+                # with a traceback; a bag's own failure is its row, and a lost worker reaches the client anyway.
                 cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                    n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.CRITICAL,
                     dashboard_address=":8787" if bokeh else ":0", preload=["bagtools.batch.worker"]))
                 client = stack.enter_context(Client(cluster))
             self.notify(f"{len(self.plan.tasks)} bags to run on {n} local worker process{'es' if n > 1 else ''}")
