@@ -29,7 +29,10 @@ scan, in the robot base frame:
    match in another place comes within ``CONTEST_MARGIN`` of it: then each is
    scored on the submap as a fine likelihood field (``match_scans_grid`` at
    ``FINE_SCORE_RESOLUTION_M``), less what the robot's reach makes of it, and
-   a margin of ``AMBIGUOUS_MARGIN`` on that score decides.
+   a margin of ``AMBIGUOUS_MARGIN`` on that score decides. Without odometry, a
+   scan whose stamp is suspect (a step under ``SHORT_STEP_RATIO`` of the usual
+   one, or the step after it) and that matches nothing well within reach is
+   searched in the largest window with no reach (counted as ``beyond_reach``).
 4. **Refinement**: when the scene's NDT cells are large (long ranges: cells
    of 1/sqrt(2) of them are at least ``MIN_REFINE_CELL_M``), NDT refines the
    winner once more on the keyframe's submap with those finer cells, the next
