@@ -506,7 +506,8 @@ class LaserOdometry:
     def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[_Match], best: _Match,
                 prior: _Prior) -> tuple[_Match, bool]:
         """(the winner, whether the step is ambiguous): ``best``, unless a match in another place is within
-        CONTEST_MARGIN of it; then the finer grid's score less the prior's cost decides between them
+        CONTEST_MARGIN of it; then the finer grid's score less the cost under the robot's reach (the prior's wide
+        part) decides between them
         (``points``: the whole scan), when it tells them apart by AMBIGUOUS_MARGIN; when it does not either,
         ``best`` stays and the step is ambiguous."""
         rivals = [m for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
