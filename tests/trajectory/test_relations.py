@@ -87,17 +87,34 @@ def test_relations_without_poses_are_counted_not_guessed() -> None:
 
 
 def test_relations_whose_stamps_meet_one_pose_are_counted_not_scored_as_no_motion() -> None:
-    """The Intel log's relations include pairs of stamps 6 ms apart for a 0.35 m motion: both meet the same scan,
-    and scoring the relation against that pose's motion to itself (none) would add its whole length as error."""
+    """The Intel log's relations include pairs of stamps 6 ms apart for a 0.35 m motion: with evo's 0.01 s
+    tolerance both meet the same scan, and scoring the relation against that pose's motion to itself (none)
+    would add its whole length as error."""
     truth = _trajectory(_path())
     rel = relations_from_trajectory(truth, np.array([[0, 1], [4, 5]]))
     close = Relations(rel.first_ns, rel.second_ns.copy(), rel.motion)
-    close.second_ns[1] = close.first_ns[1] + 6_000_000  # 6 ms after the first stamp: the same pose
-    scored = relation_errors(close, truth)
+    close.second_ns[1] = close.first_ns[1] + 6_000_000  # 6 ms after the first stamp: the same pose at 0.01 s
+    scored = relation_errors(close, truth, max_diff_ns=10_000_000)
     assert scored["used"] == 1 and scored["same_pose"] == 1 and scored["missing"] == 0
     assert scored["trans_max_m"] < 1e-9
-    only = relation_errors(Relations(close.first_ns[1:], close.second_ns[1:], close.motion[1:]), truth)
+    only = relation_errors(Relations(close.first_ns[1:], close.second_ns[1:], close.motion[1:]), truth,
+                           max_diff_ns=10_000_000)
     assert only["used"] == 0 and "both stamps at one pose" in only["unavailable"]
+
+
+def test_a_relation_names_scans_by_their_exact_stamps() -> None:
+    """A relation's stamp 3 ms from a pose names another scan of the log (the Intel log stamps scans in bursts,
+    0.3 m apart for 3 ms): by default it is missing, not scored against the neighbouring pose; a stamp
+    rounded through a float (within a microsecond) still meets its pose."""
+    truth = _trajectory(_path())
+    rel = relations_from_trajectory(truth, np.array([[0, 1], [2, 3], [4, 5]]))
+    moved = Relations(rel.first_ns.copy(), rel.second_ns.copy(), rel.motion)
+    moved.second_ns[1] += 3_000_000  # 3 ms off: another scan
+    moved.first_ns[2] += 700  # float rounding of a stamp printed to the microsecond
+    scored = relation_errors(moved, truth)
+    assert scored["used"] == 2 and scored["missing"] == 1
+    assert scored["trans_max_m"] < 1e-9
+    assert relation_errors(moved, truth, max_diff_ns=10_000_000)["used"] == 3
 
 
 @pytest.mark.parametrize("text,message", [
