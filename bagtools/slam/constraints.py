@@ -99,7 +99,7 @@ class LoopOptions:
     new_map_keyframes: int = 4
     max_candidates: int = 2
     wide_window_m: float = 2.0
-    wide_spacing_m: float = 4.0
+    wide_spacing_m: float = 2.0
     loop_spacing_m: float = 1.0
     sure_sigma_m: float = 0.3
     pending_keyframes: int = 10
