@@ -124,13 +124,14 @@ def test_real_csail_log_loops_are_right(csail_odom: Path) -> None:
 
 def test_real_csail_log_without_odometry_is_consistent(csail_odom: Path) -> None:
     """Issue target on the scans alone (the real front end, the real loop closure): aligned APE at most 0.3 m
-    against GMapping's trajectory over the 380 m path."""
+    against GMapping's trajectory over the 380 m path. It is 0.092 m; 0.114 m when a wide loop window was
+    searched once per 4 m of path (too few for a second match to confirm the first)."""
     bag = csail_odom.parent / "csail_scans"
     if not bag.is_dir():
         pytest.skip(f"real bag not available: {bag}")
     result = SlamPipeline(bag, SlamOptions()).run()
     errors = result.summary["errors_slam"]
-    assert errors["ape_aligned_m"]["rmse"] < 0.15, errors["ape_aligned_m"]
+    assert errors["ape_aligned_m"]["rmse"] < 0.105, errors["ape_aligned_m"]
     # the target is a mean of 0.1 m; GMapping's own glitches at scans 42 and 364 weigh about a centimetre of it
     assert errors["relative_gap_20"]["trans_median_m"] < 0.09, errors["relative_gap_20"]
     assert errors["relative_gap_20"]["trans_mean_m"] < 0.115, errors["relative_gap_20"]
