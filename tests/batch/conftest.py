@@ -7,6 +7,7 @@ own ``tmp_path``.
 from __future__ import annotations
 
 import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,18 @@ from simulate.pipeline import SimConfig, simulate_bag
 from tests.conftest import make_tf, write_bag
 
 T0_NS = 1_700_000_000_000_000_000
+
+
+@pytest.fixture(scope="session", autouse=True)
+def sigint_as_at_a_terminal():
+    """The Ctrl-C tests need the processes they start to get SIGINT as a terminal's would. A test run started
+    in the background of a shell (``make test &``) ignores SIGINT from its start, and every process it starts
+    would inherit that: for the session, Python's own handler (which children inherit as the default)."""
+    before = signal.getsignal(signal.SIGINT)
+    if before == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
 
 
 @dataclass(frozen=True)
