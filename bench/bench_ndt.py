@@ -97,7 +97,9 @@ def _criteria():
     return o3d.pipelines.registration.ICPConvergenceCriteria(1e-6, 1e-6, ICP_ITERATIONS)
 
 
-def _point_to_plane(current: np.ndarray, reference: np.ndarray, initial: np.ndarray) -> np.ndarray:
+def point_to_plane_icp(current: np.ndarray, reference: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """Open3D's point-to-plane ICP of 2D ``current`` (N,2) onto ``reference`` (M,2) from ``initial`` [x, y, theta]:
+    the pose [x, y, theta] of current's frame in reference's (m, rad)."""
     source, target = _lift(current), _lift(reference)
     target.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(10))
     result = o3d.pipelines.registration.registration_icp(
@@ -298,10 +300,10 @@ def run(quick: bool) -> list[Row]:
     rng = np.random.default_rng(12)
     initials = [p.truth + OFFSET * rng.choice([-1.0, 1.0], 3) for p in pairs]
     # Warm up imports and caches so the first pair is not charged for them.
-    for method in (_ndt(1.0), _point_to_plane, _generalized):
+    for method in (_ndt(1.0), point_to_plane_icp, _generalized):
         method(pairs[0].current_points, pairs[0].reference_points, initials[0])
     gicp = evaluate(_generalized, pairs, initials)
-    p2pl = evaluate(_point_to_plane, pairs, initials)
+    p2pl = evaluate(point_to_plane_icp, pairs, initials)
     rows: list[Row] = []
     for model, cell in (("paper", 1.0), ("paper", 0.5), ("widened", 1.0), ("widened", 0.5)):
         ndt = evaluate(_ndt(cell, model), pairs, initials)

@@ -28,7 +28,7 @@ import numpy as np
 
 from bagtools.slam import SlamOptions, SlamPipeline, SlamResult, laser_odometry, write_slam
 from bagtools.transforms import se2_between, tform2pose, wrap_to_pi
-from bench.bench_ndt import _point_to_plane
+from bench.bench_ndt import point_to_plane_icp
 from bench.common import Row
 from simulate.pipeline import SimConfig, simulate_bag
 
@@ -51,7 +51,7 @@ def _heading_vs_icp_deg(result: SlamResult) -> tuple[float, float]:
     at = np.clip(np.searchsorted(truth.stamps_ns, result.trajectory.stamps_ns), 0, len(truth) - 1)
     ref = tform2pose(truth.poses[at]).reshape(-1, 3)
     ours_step, ref_step = se2_between(ours[:-1], ours[1:]), se2_between(ref[:-1], ref[1:])
-    icp = np.array([_point_to_plane(steps[k + 1].points_base, steps[k].points_base, ref_step[k])
+    icp = np.array([point_to_plane_icp(steps[k + 1].points_base, steps[k].points_base, ref_step[k])
                     for k in range(len(steps) - 1)])
     ours_off, ref_off = (np.degrees(np.abs(wrap_to_pi(step[:, 2] - icp[:, 2]))) for step in (ours_step, ref_step))
     return float(np.median(ours_off)), float(np.median(ref_off))
