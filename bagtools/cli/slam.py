@@ -85,4 +85,5 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
             continue
         click.echo(f"{label}: relations error {scored['trans_mean_m']:.3f} +- {scored['trans_std_m']:.3f} m, "
                    f"{scored['rot_mean_deg']:.2f} +- {scored['rot_std_deg']:.2f} deg over {scored['used']} of "
-                   f"{scored['relations']} relations")
+                   f"{scored['relations']} relations" +
+                   (f" ({scored['missing']} without a pose at both stamps)" if scored.get("missing") else ""))

@@ -96,6 +96,7 @@ def test_relations_score_both_trajectories(tmp_path: Path) -> None:
     done = _run("slam", str(bag), "--out", str(tmp_path / "scored"), "--no-mcap", "--relations", str(relations))
     assert done.returncode == 0, done.stderr
     assert "SLAM: relations error" in done.stdout and "laser odometry: relations error" in done.stdout
+    assert done.stdout.count("(1 without a pose at both stamps)") == 2, done.stdout  # the 1.0 -> 2.0 line
     scored = json.loads((tmp_path / "scored" / "summary.json").read_text())["relations"]
     assert scored["file"] == str(relations)
     for name in ("slam", "front_end"):
