@@ -111,8 +111,9 @@ def relations_from_trajectory(trajectory: Trajectory, pairs: np.ndarray) -> Rela
 def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int = RELATION_MAX_DIFF_NS) -> dict:
     """The relations metric of ``estimate`` (see the module docstring) as a dict for summary.json.
 
-    Keys: ``relations`` (in the file), ``max_diff_s`` (the association's tolerance), ``used``, ``missing`` (no pose at a
-    stamp), ``same_pose`` (both stamps at one pose: closer together than
+    Keys: ``relations`` (in the file), ``max_diff_s`` (the association's
+    tolerance), ``used``, ``missing`` (no pose at a stamp), ``same_pose``
+    (both stamps at one pose: closer together than
     ``max_diff_ns``, which a wider tolerance meets in the Intel log, 6 ms
     apart for a 0.35 m motion; scoring them would score the relation against
     no motion),
@@ -139,8 +140,10 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
         at = np.searchsorted(estimate.stamps_ns, stamps)
         above, below = (estimate.stamps_ns[np.clip(i, 0, len(estimate) - 1)] for i in (at, at - 1))
         gap_ns = np.minimum(np.abs(above - stamps), np.abs(below - stamps))
+        nearest_s = gap_ns.min() / 1e9
+        nearest = f"{nearest_s:.3f} s" if nearest_s >= 1.0 else f"{nearest_s * 1e3:.3f} ms"
         return {**out, "unavailable": f"no relation has poses of the trajectory at both stamps (within "
-                                      f"{max_diff_ns / 1e9:g} s; the nearest pose is {gap_ns.min() / 1e9:.3f} s "
+                                      f"{max_diff_ns / 1e9:g} s; the nearest pose is {nearest} "
                                       "from a relation's stamp: were the scans stamped with another clock?)"}
     poses = tform2pose(estimate.poses).reshape(-1, 3)
     moved = se2_between(poses[at1[ok]], poses[at2[ok]]).reshape(-1, 3)
@@ -153,4 +156,5 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
             "rot_sq_mean_deg2": float((rot**2).mean())}
 
 
-__all__ = ["RELATION_MAX_DIFF_NS", "Relations", "read_relations", "relation_errors", "relations_from_trajectory", "relations_text"]
+__all__ = ["RELATION_MAX_DIFF_NS", "Relations", "read_relations", "relation_errors", "relations_from_trajectory",
+           "relations_text"]

@@ -115,6 +115,8 @@ def test_a_relation_names_scans_by_their_exact_stamps() -> None:
     assert scored["used"] == 2 and scored["missing"] == 1
     assert scored["trans_max_m"] < 1e-9
     assert relation_errors(moved, truth, max_diff_ns=10_000_000)["used"] == 3
+    late = relation_errors(Relations(rel.first_ns + 3_000_000, rel.second_ns + 3_000_000, rel.motion), truth)
+    assert late["used"] == 0 and "the nearest pose is 3.000 ms from a relation's stamp" in late["unavailable"]
 
 
 @pytest.mark.parametrize("text,message", [
