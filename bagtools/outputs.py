@@ -14,31 +14,46 @@ The rules every output follows:
   output directory, a single output file, or a directory that
   ``is_own_output`` recognises (e.g. a bag that ``simulate`` wrote). Anything
   else (a user's directory of files) is refused even with ``force``.
-- A staging directory is owned by its process through an ``flock`` on a lock
-  file inside it. Ctrl-C and SIGTERM remove it (the CLI turns SIGTERM into an
-  exception); after SIGKILL or a power cut the next run that writes to the same
-  place finds the lock free and removes the stale staging directory.
+- ``force`` replaces a directory only when it carries bagtools' own mark
+  (:func:`mark_own_output`, a ``.bagtools-output.json`` listing the files the
+  command wrote) and holds nothing else; never by the shape of its content.
+- No output may be an input, lie inside one (a rosbag2 directory), or hold one
+  (:func:`refuse_input_overlap`): a result written into a bag changes the
+  recording for every later read.
+- A staging directory carries bagtools' mark: a lock file with a fixed first
+  line, owned by its process through an ``flock``. Ctrl-C and SIGTERM remove it
+  (the CLI turns SIGTERM into an exception; the signals are held while staging
+  is set up and while results are renamed into place); after SIGKILL or a
+  power cut the next run that writes to the same place finds the lock free and
+  removes the stale staging directory. A directory without the mark is never
+  removed, whatever its name.
+- A failed or interrupted run leaves the file system as it found it: the
+  output directories it created are removed again when they are still empty.
 """
 
 from __future__ import annotations
 
 import errno
 import fcntl
+import json
 import os
 import shutil
+import signal
 import tempfile
-import time
-from collections.abc import Callable, Iterator
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from bagtools.errors import BagtoolsError, OutputExistsError
 
-_LOCK_NAME = ".lock"
+_LOCK_NAME = ".bagtools-staging.lock"
+_LOCK_MARK = b"bagtools staging directory: removed when its owner process is gone\n"
 _STAGING_SUFFIX = ".tmp"
 _OUTPUT_DIR_PREFIX = ".bagtools-"
-# A staging directory with no lock file yet may be in the middle of being created.
-_UNLOCKED_GRACE_S = 60.0
+#: The mark a command leaves in a directory it writes whole (e.g. simulate's bag).
+OWN_OUTPUT_MARK = ".bagtools-output.json"
+_HELD_SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
 
 
 class OutputBusyError(BagtoolsError):
@@ -49,62 +64,171 @@ def _os_problem(err: OSError) -> str:
     return err.strerror or str(err)
 
 
-def check_writable(path: Path, force: bool, is_own_output: Callable[[Path], bool] | None = None) -> None:
-    """Refuse ``path`` if it exists and may not be replaced.
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold Ctrl-C, SIGTERM and SIGHUP for the block and deliver them after it.
+
+    Wraps the few steps that must not be cut in half (creating and marking a
+    staging directory, moving results into place), so an interrupt lands
+    before or after them, where the clean-up of the caller runs. Only the main
+    thread handles signals; elsewhere the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum: int, frame: object) -> None:
+        pending.append(signum)
+
+    previous = {sig: signal.signal(sig, hold) for sig in _HELD_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+        for sig in dict.fromkeys(pending):
+            signal.raise_signal(sig)
+
+
+def _real(path: str | Path) -> Path:
+    return Path(os.path.realpath(os.path.expanduser(path)))
+
+
+def _input_extent(path: str | Path) -> Path:
+    """The real path a read of input ``path`` covers: a file inside a rosbag2 directory stands for the directory."""
+    real = _real(path)
+    if not real.is_dir() and (real.parent / "metadata.yaml").is_file():
+        return real.parent
+    return real
+
+
+def refuse_input_overlap(output: str | Path, inputs: Iterable[str | Path], may_hold: bool = False) -> None:
+    """Raise :class:`BagtoolsError` if ``output`` is one of ``inputs``, lies inside one, or holds one.
+
+    Paths are compared after resolving symlinks (and hard links, for files that
+    exist). ``may_hold``: a directory the command writes only named files into
+    may hold an input (``grid run.mcap --out .``); anything else may not.
+    """
+    out = _real(output)
+    for given in inputs:
+        extent = _input_extent(given)
+        same_file = out.exists() and extent.exists() and os.path.samefile(out, extent)
+        if out == extent or same_file:
+            raise BagtoolsError(f"is the input {given}; choose another output path", output)
+        if extent in out.parents:
+            raise BagtoolsError(f"lies inside the input {extent}; writing there would change the recording, so "
+                                "choose an output path outside it", output)
+        if not may_hold and out in extent.parents:
+            raise BagtoolsError(f"holds the input {given}; choose an output path that does not contain it", output)
+
+
+def check_writable(path: Path, force: bool, is_own_output: Callable[[Path], bool] | None = None,
+                   inputs: Iterable[str | Path] = ()) -> None:
+    """Refuse ``path`` if it exists and may not be replaced, or if it overlaps one of ``inputs``.
 
     A directory is replaced only with ``force`` and only when ``is_own_output``
-    recognises it as this command's output; a file only with ``force``.
+    recognises it as this command's output; a file (or a symlink, even a
+    dangling one) only with ``force``.
     """
+    refuse_input_overlap(path, inputs)
     if path.is_dir() and not path.is_symlink():
         if is_own_output is None or not is_own_output(path):
             raise OutputExistsError(
                 "is an existing directory that this command did not write; --force replaces only the "
                 "command's own output, so choose another path", path)
-    if path.exists() and not force:
+    if os.path.lexists(path) and not force:
         raise OutputExistsError("already exists (use --force to overwrite)", path)
 
 
+def mark_own_output(directory: Path, command: str) -> None:
+    """Mark ``directory`` (about to be published) as written whole by ``command``, listing its files."""
+    files = sorted(p.name for p in directory.iterdir())
+    (directory / OWN_OUTPUT_MARK).write_text(json.dumps({"written_by": f"bagtools {command}", "files": files},
+                                                        indent=1) + "\n")
+
+
+def is_own_output(directory: Path, command: str) -> bool:
+    """True when ``directory`` may be replaced whole by ``command`` with ``--force``.
+
+    It must be empty, or carry the mark :func:`mark_own_output` left and hold
+    exactly the files listed there (nothing of the user's was added).
+    """
+    try:
+        entries = {p.name: p for p in directory.iterdir()}
+        if not entries:
+            return True
+        mark = json.loads((directory / OWN_OUTPUT_MARK).read_text())
+    except (OSError, ValueError):
+        return False
+    if not isinstance(mark, dict) or mark.get("written_by") != f"bagtools {command}":
+        return False
+    files = mark.get("files")
+    if not isinstance(files, list) or set(entries) != {*map(str, files), OWN_OUTPUT_MARK}:
+        return False
+    return all(p.is_file() and not p.is_symlink() for p in entries.values())
+
+
 class _Staging:
-    """A hidden staging directory in ``parent``, owned by this process (flock) until :meth:`close`."""
+    """A hidden staging directory in ``parent``, marked as bagtools' and owned by this process (flock) until
+    :meth:`close`. Creation is all or nothing, also under Ctrl-C and SIGTERM."""
 
     def __init__(self, parent: Path, prefix: str) -> None:
         sweep_stale_staging(parent, prefix)
+        self.path: Path | None = None
+        self._lock_fd: int | None = None
         try:
-            self.path = Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}.", suffix=_STAGING_SUFFIX, dir=parent))
-            self._lock_fd = os.open(self.path / _LOCK_NAME, os.O_CREAT | os.O_WRONLY, 0o600)
+            with _signals_held():
+                self.path = Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}.", suffix=_STAGING_SUFFIX,
+                                                  dir=parent))
+                self._lock_fd = os.open(self.path / _LOCK_NAME, os.O_CREAT | os.O_WRONLY, 0o600)
+                fcntl.flock(self._lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                os.write(self._lock_fd, _LOCK_MARK)
         except OSError as err:
+            self.close()
             raise BagtoolsError(f"cannot write here: {_os_problem(err)}", parent) from err
-        fcntl.flock(self._lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BaseException:
+            self.close()
+            raise
+
+    def __enter__(self) -> _Staging:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def close(self) -> None:
-        shutil.rmtree(self.path, ignore_errors=True)
-        os.close(self._lock_fd)
+        with _signals_held():
+            if self.path is not None:
+                shutil.rmtree(self.path, ignore_errors=True)
+                self.path = None
+            if self._lock_fd is not None:
+                os.close(self._lock_fd)
+                self._lock_fd = None
 
 
-def _staging_is_live(staging: Path) -> bool:
-    """True when a live process holds the lock of ``staging`` (or it is too new to judge)."""
+def _staging_state(staging: Path) -> str:
+    """'live' (its owner holds the lock), 'stale' (bagtools' mark, owner gone) or 'foreign' (no mark: not ours)."""
     try:
-        fd = os.open(staging / _LOCK_NAME, os.O_RDONLY)
-    except FileNotFoundError:
-        try:
-            return time.time() - staging.stat().st_mtime < _UNLOCKED_GRACE_S
-        except OSError:
-            return False
+        fd = os.open(staging / _LOCK_NAME, os.O_RDONLY | os.O_NOFOLLOW)
     except OSError:
-        return True
+        return "foreign"
     try:
+        if os.read(fd, len(_LOCK_MARK)) != _LOCK_MARK:
+            return "foreign"
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as err:
         if err.errno in (errno.EWOULDBLOCK, errno.EAGAIN):
-            return True
-        raise
+            return "live"
+        return "foreign"
     finally:
         os.close(fd)
-    return False
+    return "stale"
 
 
 def sweep_stale_staging(parent: Path, prefix: str) -> list[Path]:
-    """Remove staging directories ``parent/<prefix>*.tmp`` whose owner process is gone; return the live ones."""
+    """Remove bagtools' staging directories ``parent/<prefix>*.tmp`` whose owner process is gone; return the
+    live ones. A directory of that name without bagtools' mark is left alone."""
     live: list[Path] = []
     try:
         candidates = [p for p in parent.iterdir() if p.name.startswith(prefix) and p.name.endswith(_STAGING_SUFFIX)]
@@ -113,9 +237,10 @@ def sweep_stale_staging(parent: Path, prefix: str) -> list[Path]:
     for staging in candidates:
         if not staging.is_dir() or staging.is_symlink():
             continue
-        if _staging_is_live(staging):
+        state = _staging_state(staging)
+        if state == "live":
             live.append(staging)
-        else:
+        elif state == "stale":
             shutil.rmtree(staging, ignore_errors=True)
     return live
 
@@ -131,18 +256,31 @@ def _directory_lock(directory: Path) -> Iterator[None]:
         os.close(fd)
 
 
-def _make_parent(path: Path) -> None:
+def _make_parent(path: Path) -> list[Path]:
+    """Create directory ``path`` and its missing parents; return those created, outermost first."""
+    missing = [p for p in (path, *path.parents) if not os.path.lexists(p)][::-1]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
+        _remove_created(missing)
         raise BagtoolsError(f"cannot create the output directory: {_os_problem(err)}", path) from err
     if not path.is_dir():
         raise BagtoolsError("is not a directory", path)
+    return missing
+
+
+def _remove_created(created: list[Path]) -> None:
+    """Remove the directories a failed run created (``_make_parent``'s list), innermost first, if still empty."""
+    for directory in reversed(created):
+        try:
+            directory.rmdir()
+        except OSError:
+            return
 
 
 def _replace_onto(staged: Path, path: Path, force: bool, is_own_output: Callable[[Path], bool] | None) -> None:
     """Move ``staged`` onto ``path`` under the directory lock, re-checking what is there now."""
-    with _directory_lock(path.parent):
+    with _directory_lock(path.parent), _signals_held():
         check_writable(path, force, is_own_output)
         if path.is_dir() and not path.is_symlink():
             # Own output directory, with force: move the old one aside, the new one in, then drop the old.
@@ -157,59 +295,66 @@ def _replace_onto(staged: Path, path: Path, force: bool, is_own_output: Callable
 
 
 @contextmanager
-def atomic_path(path: str | Path, force: bool = False,
-                is_own_output: Callable[[Path], bool] | None = None) -> Iterator[Path]:
+def atomic_path(path: str | Path, force: bool = False, is_own_output: Callable[[Path], bool] | None = None,
+                inputs: Iterable[str | Path] = ()) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; move it onto ``path`` when the block succeeds.
 
     The caller writes a file (or creates a directory) at the yielded path. The
-    staging directory is removed if the block raises (including Ctrl-C and,
-    through the CLI, SIGTERM). An existing directory at ``path`` is replaced
-    only with ``force`` and when ``is_own_output(path)`` is true.
+    staging directory, and any parent directory this call created, are removed
+    if the block raises (including Ctrl-C and, through the CLI, SIGTERM). An
+    existing directory at ``path`` is replaced only with ``force`` and when
+    ``is_own_output(path)`` is true. ``path`` may not overlap ``inputs``.
     """
     path = Path(path)
-    check_writable(path, force, is_own_output)
-    _make_parent(path.parent)
-    staging = _Staging(path.parent, f".{path.name}.")
-    staged = staging.path / path.name
+    check_writable(path, force, is_own_output, inputs)
+    created = _make_parent(path.parent)
+    done = False
     try:
-        yield staged
-        if not staged.exists():
-            raise BagtoolsError("writer produced no output", path)
-        _replace_onto(staged, path, force, is_own_output)
+        with _Staging(path.parent, f".{path.name}.") as staging:
+            staged = staging.path / path.name
+            yield staged
+            if not staged.exists():
+                raise BagtoolsError("writer produced no output", path)
+            _replace_onto(staged, path, force, is_own_output)
+            done = True
     except OSError as err:
         raise BagtoolsError(f"cannot write: {_os_problem(err)}", path) from err
     finally:
-        staging.close()
+        if not done:
+            _remove_created(created)
 
 
-def write_bytes_atomic(path: str | Path, data: bytes, force: bool = False) -> Path:
-    """Write ``data`` to ``path`` atomically and return ``path``."""
-    with atomic_path(path, force) as tmp:
+def write_bytes_atomic(path: str | Path, data: bytes, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
+    """Write ``data`` to ``path`` atomically and return ``path``; ``path`` may not overlap ``inputs``."""
+    with atomic_path(path, force, inputs=inputs) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
-def write_text_atomic(path: str | Path, text: str, force: bool = False) -> Path:
-    """Write UTF-8 ``text`` to ``path`` atomically and return ``path``."""
-    return write_bytes_atomic(path, text.encode("utf-8"), force)
+def write_text_atomic(path: str | Path, text: str, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically and return ``path``; ``path`` may not overlap ``inputs``."""
+    return write_bytes_atomic(path, text.encode("utf-8"), force, inputs)
 
 
-def check_outputs(out_dir: str | Path, names: list[str], force: bool) -> None:
+def check_outputs(out_dir: str | Path, names: list[str], force: bool, inputs: Iterable[str | Path] = ()) -> None:
     """Raise before any work is done if ``out_dir`` cannot take ``names``.
 
-    Refuses an ``out_dir`` that is a file, a named output that is a directory,
-    an existing named file without ``force``, and a directory another live
-    bagtools run is writing into.
+    Refuses an ``out_dir`` that is a file or lies inside one of ``inputs`` (a
+    rosbag2 directory), a named output that is an input or a directory, an
+    existing named file (or symlink) without ``force``, and a directory another
+    live bagtools run is writing into.
     """
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
+    inputs = list(inputs)
+    refuse_input_overlap(out_dir, inputs, may_hold=True)
+    if os.path.lexists(out_dir) and not out_dir.is_dir():
         raise BagtoolsError("is not a directory", out_dir)
     for name in names:
         target = out_dir / name
         if target.is_dir() and not target.is_symlink():
             raise OutputExistsError("is a directory, where this command writes a file; move it or choose another --out",
                                     target)
-        check_writable(target, force)
+        check_writable(target, force, inputs=inputs)
     if out_dir.is_dir():
         _refuse_live_writers(out_dir)
 
@@ -245,33 +390,47 @@ class OutputDir:
         self.force = force
         self._staging: _Staging | None = None
         self._files: Path | None = None
+        self._created: list[Path] = []
 
     def __enter__(self) -> Path:
         check_outputs(self.out_dir, self.names, self.force)
-        _make_parent(self.out_dir)
-        self._staging = _Staging(self.out_dir, _OUTPUT_DIR_PREFIX)
-        _refuse_live_writers(self.out_dir)
-        self._files = self._staging.path / "files"
-        self._files.mkdir()
+        self._created = _make_parent(self.out_dir)
+        try:
+            self._staging = _Staging(self.out_dir, _OUTPUT_DIR_PREFIX)
+            _refuse_live_writers(self.out_dir)
+            self._files = self._staging.path / "files"
+            self._files.mkdir()
+        except BaseException:
+            self._close(published=False)
+            raise
         return self._files
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if self._staging is None or self._files is None:
             return
+        published = False
         try:
             if exc_type is None:
                 self._publish(self._files)
+                published = True
         except OSError as err:
             raise BagtoolsError(f"cannot write: {_os_problem(err)}", self.out_dir) from err
         finally:
+            self._close(published)
+
+    def _close(self, published: bool) -> None:
+        """Remove the staging directory and, unless results were published, the directories this run created."""
+        if self._staging is not None:
             self._staging.close()
+        if not published:
+            _remove_created(self._created)
 
     def _publish(self, files: Path) -> None:
         produced = sorted(p.name for p in files.iterdir())
         unnamed = [name for name in produced if name not in self.names]
         if unnamed:
             raise BagtoolsError(f"internal error: staged outputs not declared: {', '.join(unnamed)}", self.out_dir)
-        with _directory_lock(self.out_dir):
+        with _directory_lock(self.out_dir), _signals_held():
             for name in self.names:  # what another run wrote meanwhile is refused too
                 target = self.out_dir / name
                 if target.is_dir() and not target.is_symlink():

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from bagtools.outputs import atomic_path, check_writable
+from bagtools.outputs import atomic_path, check_writable, mark_own_output
 from bagtools.progress import progress_bar
 from bagtools.transforms import pose2tform, se2_compose
 from simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, amcl_map_to_odom
@@ -330,18 +330,20 @@ def simulate_bag(out_path: str | Path, config: SimConfig, force: bool = False) -
     traj = plan_trajectory(config, world)
     sim = _BagSimulation(config, world, traj, _rngs(config.seed))
     names, kinds, indices, log_ns = sim.schedule()
-    with atomic_path(out_path, force, is_rosbag2_output) as staged, SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
-        mb = MessageBuilder(bag.typestore)
-        with progress_bar(total=round(config.duration_s, 3), desc="simulate", unit="s") as bar:
-            shown_s = 0.0
-            for k, j, t_log in zip(kinds.tolist(), indices.tolist(), log_ns.tolist()):
-                topic, data = sim.message(mb, names[k], j)
-                bag.write(topic, t_log, data)
-                sim_s = min((t_log - config.start_time_ns) / 1e9, config.duration_s)
-                if sim_s - shown_s >= 1.0:
-                    bar.update(round(sim_s - shown_s, 3))
-                    shown_s = sim_s
-        counts = dict(bag.counts)
+    with atomic_path(out_path, force, is_rosbag2_output) as staged:
+        with SimBagWriter(staged, config.ros_distro, sim.topics) as bag:
+            mb = MessageBuilder(bag.typestore)
+            with progress_bar(total=round(config.duration_s, 3), desc="simulate", unit="s") as bar:
+                shown_s = 0.0
+                for k, j, t_log in zip(kinds.tolist(), indices.tolist(), log_ns.tolist()):
+                    topic, data = sim.message(mb, names[k], j)
+                    bag.write(topic, t_log, data)
+                    sim_s = min((t_log - config.start_time_ns) / 1e9, config.duration_s)
+                    if sim_s - shown_s >= 1.0:
+                        bar.update(round(sim_s - shown_s, 3))
+                        shown_s = sim_s
+            counts = dict(bag.counts)
+        mark_own_output(staged, "simulate")  # so that --force may replace this bag, and nothing else
     return _summary(out_path, config, traj, counts)
 
 

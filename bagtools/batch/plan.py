@@ -25,6 +25,7 @@ from bagtools.batch.task import (
     COMMON_COLUMNS, FAILED, BagTask, ForeignOutputError, check_owner, completed_row, new_row, read_marker,
 )
 from bagtools.errors import BagtoolsError
+from bagtools.outputs import refuse_input_overlap
 
 
 @dataclass
@@ -99,6 +100,7 @@ def plan_batch(command: str, bag_args: Sequence[str], out_dir: str | Path, param
     out_dir = Path(out_dir).absolute()
     check_out_dir(out_dir, command)
     bags = find_bags(bag_args, skip=[out_dir])
+    refuse_input_overlap(out_dir, bags)  # results written into a bag, or bags inside the results, change the bags
     names = output_names(bags)
     settings = _json_settings({k: v for k, v in params.items() if k not in job.ignored})
     plan = BatchPlan(command, job, out_dir, force, list(zip(bags, names)))

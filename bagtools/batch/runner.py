@@ -12,9 +12,12 @@ Each bag is one task, :func:`bagtools.batch.task.run_task`, largest bag first
 (the long ones do not end up last, alone). A problem with a bag is a row, not
 an exception; a worker that dies mid-task (killed, out of memory) has its task
 run again on another worker by the scheduler, up to Dask's
-``distributed.scheduler.allowed-failures`` times, after which the bag is a
-failed row. ``retries`` covers the rest of Dask's own failures (a task that
-could not be sent or unpacked).
+``distributed.scheduler.allowed-failures`` times. Dask blames every task a
+dying worker held, the bags queued behind the one running too, so a bag that
+Dask gives up on (``KilledWorker``) is run once more alone, after the rest:
+it is a failed row only when it kills the workers it runs on by itself, and an
+innocent bag that was merely queued beside it is redone. ``retries`` covers
+the rest of Dask's own failures (a task that could not be sent or unpacked).
 """
 
 from __future__ import annotations
@@ -112,11 +115,14 @@ class BatchRun:
             with self._client() as client:
                 self._check_workers(client)
                 claim_out_dir(self.plan.out_dir, self.plan.command)
-                futures = self._submit(client)
+                futures = self._submit(client, self.plan.tasks)
                 try:
-                    self._collect(futures, len(client.nthreads()))
+                    blamed = self._collect(futures, len(client.nthreads()))
+                    for task in blamed:  # alone now: a bag that kills its worker again is the culprit
+                        futures = self._submit(client, [task])
+                        self._collect(futures, len(client.nthreads()), alone=True)
                 except BaseException:
-                    client.cancel(futures, force=True)
+                    client.cancel(list(futures), force=True)
                     raise
         return self.plan.ordered(self.rows)
 
@@ -201,10 +207,10 @@ class BatchRun:
 
     # -- the tasks --------------------------------------------------------------
 
-    def _submit(self, client: Any) -> dict[Any, BagTask]:
-        """Submit every task, largest bag first; returns future -> task."""
+    def _submit(self, client: Any, tasks: list[BagTask]) -> dict[Any, BagTask]:
+        """Submit ``tasks``, largest bag first; returns future -> task."""
         batch_id = uuid.uuid4().hex[:8]
-        tasks = sorted(self.plan.tasks, key=lambda t: _bag_bytes(t.bag), reverse=True)
+        tasks = sorted(tasks, key=lambda t: _bag_bytes(t.bag), reverse=True)
         futures = {}
         for rank, task in enumerate(tasks):
             future = client.submit(run_task, task, key=f"bagtools-{task.command}-{task.name}-{batch_id}",
@@ -212,25 +218,35 @@ class BatchRun:
             futures[future] = task
         return futures
 
-    def _collect(self, futures: dict[Any, BagTask], workers: int) -> None:
-        """Rows of the finished ``futures`` as they come, with a progress bar; ``workers``: how many run them."""
-        from distributed import as_completed
+    def _collect(self, futures: dict[Any, BagTask], workers: int, alone: bool = False) -> list[BagTask]:
+        """Rows of the finished ``futures`` as they come, with a progress bar; ``workers``: how many run them.
+
+        Returns the tasks Dask gave up on because their workers died (``KilledWorker``), which may be
+        innocent bags queued beside the culprit; their rows are written only when ``alone`` (a task
+        run by itself, whose worker deaths are its own).
+        """
+        from distributed import KilledWorker, as_completed
 
         columns = row_columns(self.plan.job)
         skipped = sum(row["status"] == SKIPPED for row in self.rows.values())
         remaining = len(futures)
+        blamed: list[BagTask] = []
         with progress_bar(total=self.plan.total, desc=f"batch {self.plan.command}", unit="bag") as bar:
             bar.update(len(self.rows))
             for future in as_completed(list(futures)):
                 remaining -= 1
-                if remaining == workers - 1:  # a worker is idle for good: import the fleet table's writers meanwhile
+                if remaining == workers - 1 and not alone:  # a worker is idle for good: preload the fleet writers
                     threading.Thread(target=preload_fleet_writers, name="bagtools-preload", daemon=True).start()
                 task = futures[future]
+                if not alone and future.status == "error" and isinstance(future.exception(), KilledWorker):
+                    blamed.append(task)
+                    continue
                 row = row_of_future(future, task)
                 self.rows[task.name] = {k: row.get(k) for k in columns}
                 bar.update(1)
                 failed = sum(r["status"] == FAILED for r in self.rows.values())
                 bar.set_postfix(failed=failed, skipped=skipped, refresh=False)
+        return blamed
 
 
 def row_of_future(future: Any, task: BagTask) -> dict:
@@ -247,8 +263,9 @@ def row_of_future(future: Any, task: BagTask) -> dict:
         return new_row(task, FAILED, "internal error: Dask cancelled the task")
     exc = future.exception()
     if isinstance(exc, KilledWorker):
-        return new_row(task, FAILED, f"{task.bag}: the worker running it died each time it was tried "
-                                     "(killed, out of memory, or a crash in native code)")
+        return new_row(task, FAILED, f"{task.bag}: the worker running it died each time it was tried, "
+                                     "also with no other bag beside it (killed, out of memory, or a crash in "
+                                     "native code)")
     return new_row(task, FAILED, one_line(f"internal error: {type(exc).__name__}: {exc}"))
 
 

@@ -49,7 +49,7 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
     from bagtools.outputs import check_outputs
 
-    check_outputs(out_dir, GRID_MAP_FILES, force)  # fail before the work, not after it
+    check_outputs(out_dir, GRID_MAP_FILES, force, inputs=[bag, *([poses] if poses not in ('tf', 'ground-truth') else [])])  # fail before the work, not after it
 
     options = GridMapOptions(topic=topic, frame=frame or GridMapOptions.default_frame(poses), poses=poses,
                              resolution=resolution, max_range_m=max_range, base_frame=base_frame,

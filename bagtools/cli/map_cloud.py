@@ -41,7 +41,7 @@ def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample
     from bagtools.cloudmap import CLOUD_MAP_FILES, CloudMapOptions, CloudMapPipeline, write_cloud_map
     from bagtools.outputs import check_outputs
 
-    check_outputs(out_dir, CLOUD_MAP_FILES, force)  # fail before the work, not after it
+    check_outputs(out_dir, CLOUD_MAP_FILES, force, inputs=[bag])  # fail before the work, not after it
 
     options = CloudMapOptions(topic=topic, frame=frame, stamp=stamp, sample=sample, voxel_m=voxel,
                               max_range_m=max_range, seed=seed)

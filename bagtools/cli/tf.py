@@ -36,14 +36,18 @@ def frames(bag: str, dot_file: str | None, force: bool) -> None:
       bagtools tf frames run.mcap
       bagtools tf frames run.mcap --dot tf.dot && dot -Tpdf tf.dot -o tf.pdf
     """
-    from bagtools.outputs import write_text_atomic
+    from pathlib import Path
+
+    from bagtools.outputs import check_writable, write_text_atomic
     from bagtools.tf.dot import render_dot
     from bagtools.tf.tree import read_frame_tree
 
+    if dot_file:
+        check_writable(Path(dot_file), force, inputs=[bag])  # before the work, not after it
     tree = read_frame_tree(bag)
     _warn(tree.warnings)
     if dot_file:
-        write_text_atomic(dot_file, render_dot(tree.infos, tree.origin_ns), force)
+        write_text_atomic(dot_file, render_dot(tree.infos, tree.origin_ns), force, inputs=[bag])
     click.echo(tree.text())
 
 
@@ -65,13 +69,17 @@ def echo(bag: str, target: str, source: str, rate_hz: float, csv_file: str | Non
       bagtools tf echo run.mcap odom base_link --rate 5
       bagtools tf echo run.mcap map base_link --rate 10 --csv map_base.csv
     """
-    from bagtools.outputs import write_text_atomic
+    from pathlib import Path
+
+    from bagtools.outputs import check_writable, write_text_atomic
     from bagtools.tf.echo import echo_bag, echo_csv, format_echo
 
+    if csv_file:
+        check_writable(Path(csv_file), force, inputs=[bag])  # before the work, not after it
     table, warnings = echo_bag(bag, target, source, rate_hz)
     _warn(warnings)
     if csv_file:
-        write_text_atomic(csv_file, echo_csv(table), force)
+        write_text_atomic(csv_file, echo_csv(table), force, inputs=[bag])
         click.echo(f"wrote {table.stamp_ns.size} samples of {target} -> {source} to {csv_file}")
     else:
         click.echo(format_echo(table))

@@ -42,8 +42,8 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
     message type with no table (see :mod:`bagtools.export.tables`), before any work.
     """
     out = Path(out)
+    check_writable(out, force, inputs=[bag_path])
     fmt = output_format(out)
-    check_writable(out, force)
     with open_bag(bag_path) as bag:
         info = bag.require_topic(topic)
         rows_of = ROWS.get(info.msgtype)
@@ -51,7 +51,7 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
             kinds = "LaserScan, PointCloud2, Odometry, TF (TFMessage) and PointStamped"
             raise TopicError(f"topic '{topic}' has type {info.msgtype}; export reads {kinds}", bag.path)
         summary = ExportSummary(out, fmt, info.msgtype)
-        with atomic_path(out, force) as staged:
+        with atomic_path(out, force, inputs=[bag_path]) as staged:
             sink = open_sink(staged, fmt)
             try:
                 for rec in progress(bag.messages([topic]), total=info.count, desc="exporting", unit="msg"):

@@ -215,7 +215,7 @@ def follow_point_bag(bag: str | Path, out_dir: str | Path, point: tuple[float, f
         raise BagtoolsError(f"--point must be three finite coordinates within 1e5 m, got {point}", bag)
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise BagtoolsError(f"--rate must be a positive number of Hz, got {rate_hz}", bag)
-    check_outputs(out_dir, OUTPUT_NAMES, force)  # before the work, not after it
+    check_outputs(out_dir, OUTPUT_NAMES, force, inputs=[bag])  # before the work, not after it
     if topic is not None:
         buffer, points = read_clicked_points(bag, topic)
     else:

@@ -28,6 +28,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from bagtools.errors import BagtoolsError
+from bagtools.outputs import is_own_output
 from simulate.writer.mcap_file import McapFileWriter
 from simulate.writer.metadata import BagInfo, OfferedQos, TopicInfo, metadata_yaml, qos_string, serialized_metadata
 
@@ -57,14 +58,13 @@ TOPICS: dict[str, tuple[str, OfferedQos]] = {
 
 
 def is_rosbag2_output(path: Path) -> bool:
-    """True when ``path`` is a directory ``simulate`` may replace with ``--force``: empty, or a rosbag2
-    directory of metadata.yaml and .mcap files only (a bag it wrote), nothing else of the user's."""
-    entries = list(path.iterdir())
-    if not entries:
-        return True
-    names = {p.name for p in entries}
-    return ("metadata.yaml" in names and all(p.is_file() and not p.is_symlink() for p in entries)
-            and all(n == "metadata.yaml" or n.endswith(".mcap") for n in names))
+    """True when ``path`` is a directory ``simulate`` may replace with ``--force``: empty, or a bag it wrote.
+
+    A bag ``simulate`` wrote carries bagtools' mark (:func:`bagtools.outputs.mark_own_output`) listing
+    its files, and holds nothing else. A rosbag2 directory without the mark (``ros2 bag record``'s, or
+    one a user added files to) is never replaced, whatever it holds.
+    """
+    return is_own_output(path, "simulate")
 
 
 def typestore_for(ros_distro: str) -> Typestore:

@@ -102,3 +102,51 @@ def test_a_killed_worker_does_not_stop_the_batch(fleet: Fleet, cluster, tmp_path
     for r in rows:
         assert (out_dir / r["bag"] / MARKER).is_file() and (out_dir / r["bag"] / "trajectory.tum").is_file()
     assert not list(out_dir.rglob("*.tmp"))  # the killed bag's staging was swept when it was redone
+
+
+@pytest.fixture
+def nanny_cluster(tmp_path: Path) -> Iterator[str]:
+    """A scheduler that gives up on a task after 2 worker deaths, and one single-threaded worker under a nanny
+    (restarted when it dies) whose preload makes a bag named ``kills-its-worker`` end the worker process."""
+    from distributed import Client
+
+    scheduler_file = tmp_path / "scheduler.json"
+    os.environ["DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES"] = "1"
+    try:
+        procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                       "--scheduler-file", str(scheduler_file), log=tmp_path / "scheduler.log")]
+    finally:
+        del os.environ["DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES"]
+    try:
+        _wait_for(scheduler_file.exists, 60, "the scheduler")
+        address = json.loads(scheduler_file.read_text())["address"]
+        procs.append(_dask("worker", address, "--nthreads", "1", "--nworkers", "1", "--host", "127.0.0.1",
+                           "--no-dashboard", "--preload", "tests.batch.killer_worker", log=tmp_path / "worker.log"))
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(1, timeout=60)
+        yield address
+    finally:
+        for proc in procs:  # the nanny has a child: end the whole process group
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def test_a_bag_that_kills_its_worker_fails_alone_and_the_bag_queued_beside_it_is_redone(
+        fleet: Fleet, nanny_cluster: str, tmp_path: Path, capsys) -> None:
+    import shutil
+
+    killer = tmp_path / "bags" / "kills-its-worker"
+    shutil.copytree(fleet.good[0], killer)
+    (killer / "padding.bin").write_bytes(b"\0" * 10_000_000)  # the largest bag: it starts first, the other queues
+    out_dir = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["batch", "grid", str(killer), str(fleet.good[2]), "--out", str(out_dir), "--scheduler", nanny_cluster,
+              "--", "--no-mcap"])
+    out, err = capsys.readouterr()
+    assert exit_info.value.code == 1, err
+    with (out_dir / "fleet.csv").open() as f:
+        rows = {r["bag"]: r for r in csv.DictReader(f)}
+    assert rows[fleet.good[2].name]["status"] == "ok", rows
+    assert rows["kills-its-worker"]["status"] == "failed"
+    assert "died each time it was tried, also with no other bag beside it" in rows["kills-its-worker"]["error"]

@@ -32,7 +32,8 @@ def test_a_finished_future_gives_the_tasks_row() -> None:
 def test_a_bag_that_killed_every_worker_is_a_failed_row_that_says_so() -> None:
     row = row_of_future(_Future("error", exception=KilledWorker("bagtools-grid-run1-x", "tcp://w:1", 3)), TASK)
     assert row["status"] == FAILED and row["bag"] == "run1"
-    assert row["error"] == ("/data/run1: the worker running it died each time it was tried (killed, out of memory, "
+    assert row["error"] == ("/data/run1: the worker running it died each time it was tried, also with no other bag "
+                            "beside it (killed, out of memory, "
                             "or a crash in native code)")
 
 
