@@ -13,10 +13,12 @@ from bagtools.dataset.scans import (
     SensorPoints,
     SensorStream,
     posed_scan_chunks,
+    recording_order,
     require_topic,
+    stamped_late,
 )
 
 __all__ = [
     "NO_SCAN_TRANSFORM_WARNING", "PosedScan", "ScanMessage", "ScanPoseSource", "ScanStream", "SensorPoints",
-    "SensorStream", "TfScanPoses", "TrajectoryScanPoses", "posed_scan_chunks", "require_topic",
+    "SensorStream", "TfScanPoses", "TrajectoryScanPoses", "posed_scan_chunks", "recording_order", "require_topic", "stamped_late",
 ]

@@ -44,6 +44,44 @@ CHUNK_SCANS = 256
 """Scans posed per batch lookup."""
 
 
+#: How far (in scans) a scan may sit from its place in stamp order for header.seq to count as its recording
+#: order: a publisher that restarted (seq from 0 again) or two publishers on one topic move scans much farther.
+MAX_REORDER_SCANS = 100
+
+
+def recording_order(stamps_ns: np.ndarray, seqs: list[int | None]) -> np.ndarray | None:
+    """The order the scans were recorded in, when their stamps say otherwise; None when the stamps' order holds.
+
+    ``stamps_ns`` (N,) and ``seqs`` (N,): the scans as read (stamp order). ROS 1
+    publishers number their messages (``header.seq``) as they send them; when
+    every scan has a distinct seq and sorting by it moves no scan more than
+    :data:`MAX_REORDER_SCANS` places, a scan whose seq is out of step with its
+    stamp was stamped with a time earlier (or later) than its neighbours' (the
+    Intel Research Lab log stamps 631 of 13631 scans up to 0.9 s early). Returns
+    the permutation of ``range(N)`` in seq order, or None (no seq, a restart, or
+    nothing out of order).
+    """
+    n = len(seqs)
+    if n < 2 or any(s is None for s in seqs):
+        return None
+    seq = np.asarray(seqs, dtype=np.int64)
+    order = np.argsort(seq, kind="stable")
+    if np.all(order == np.arange(n)) or np.unique(seq).size != n:
+        return None
+    if np.abs(order - np.arange(n)).max() > MAX_REORDER_SCANS:
+        return None
+    return order
+
+
+def stamped_late(stamps_ns: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(N,) bool: the messages stamped before a message recorded before them, ``order`` being the recording
+    order (a permutation of the messages as read, e.g. from :func:`recording_order`)."""
+    in_order = np.asarray(stamps_ns)[order]
+    late = np.zeros(len(in_order), dtype=bool)
+    late[order[1:]] = in_order[1:] < np.maximum.accumulate(in_order)[:-1]
+    return late
+
+
 def require_topic(bag: BagReader, topic: str, msgtypes: tuple[str, ...], what: str) -> None:
     """Raise :class:`TopicError` naming the topics of the wanted types when ``topic`` is missing or of another type."""
     if topic not in bag.topics:
@@ -55,10 +93,11 @@ def require_topic(bag: BagReader, topic: str, msgtypes: tuple[str, ...], what: s
 
 @dataclass(frozen=True, slots=True)
 class ScanMessage:
-    """One usable LaserScan and its bag (log) time in ns."""
+    """One usable LaserScan, its bag (log) time in ns and its ROS 1 header ``seq`` (None without one)."""
 
     log_time_ns: int
     scan: LaserScanArrays
+    seq: int | None = None
 
 
 class ScanStream:
@@ -110,7 +149,8 @@ class ScanStream:
                 continue
             self.frame_ids.add(scan.frame_id)
             last_ns = scan.stamp_ns
-            yield ScanMessage(rec.log_time_ns, scan)
+            seq = getattr(rec.msg.header, "seq", None)
+            yield ScanMessage(rec.log_time_ns, scan, None if seq is None else int(seq))
 
     def warnings(self) -> list[str]:
         """One line per kind of skipped scan and per kind of implausible header value, with counts."""

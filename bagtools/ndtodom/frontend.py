@@ -347,6 +347,7 @@ class LaserOdometry:
         self.counts: Counter[str] = Counter()
         self._keyframe: _Keyframe | None = None
         self._last_odom: np.ndarray | None = None
+        self._last_odom_pose = np.zeros(3)  # the pose of the step that had the odometry _last_odom
         self._velocity = np.zeros(3)  # per second, in the base frame
         self._scores: list[float] = []
         self._steps_s: list[float] = []
@@ -367,7 +368,7 @@ class LaserOdometry:
             step = self._next(stamp_ns, sparse, points_base, odom)
         self.run.steps.append(step)
         if odom is not None:
-            self._last_odom = odom
+            self._last_odom, self._last_odom_pose = odom, step.pose
         return step
 
     def _first(self, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> ScanStep:
@@ -447,7 +448,7 @@ class LaserOdometry:
         cv[2] = float(np.clip(cv[2], -opts.max_turn_rate_radps * dt, opts.max_turn_rate_radps * dt))
         guesses: dict[str, np.ndarray] = {}
         if odom is not None and self._last_odom is not None and opts.init in ("auto", "odom"):
-            guesses["odom"] = _compose(last_pose, _between(self._last_odom, odom))
+            guesses["odom"] = _compose(self._last_odom_pose, _between(self._last_odom, odom))
         guesses["constant-velocity"] = _compose(last_pose, cv)
         guesses["zero"] = last_pose.copy()
         first = opts.init if opts.init in guesses else next(iter(guesses))

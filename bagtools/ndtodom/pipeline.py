@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.dataset import ScanStream, require_topic
+from bagtools.dataset import ScanStream, recording_order, require_topic, stamped_late
 from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry, open_bag,
@@ -38,7 +38,7 @@ from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, rpe_frames, rpe_translation
-from bagtools.transforms import pose2tform, tform2pose
+from bagtools.transforms import pose2tform, quat2tform, tform2pose, xyzw2quat
 
 INIT_MODES = ("auto", *GUESSES)
 REFERENCE_MODES = ("previous", "keyframe")
@@ -168,6 +168,9 @@ class NdtOdomPipeline:
         self.T_base_scan = np.eye(4)
         self.scan_frame = ""
         self.cell_size_m: float | None = None
+        self.seqs: list[int | None] = []
+        self.reordered = 0
+        self._raw_odometry: TfArrays | None = None
 
     def run(self) -> NdtOdomResult:
         with open_bag(self.bag_path) as bag:
@@ -183,11 +186,15 @@ class NdtOdomPipeline:
                 problem = (f"no usable scan on {self.options.topic}: every scan was skipped "
                            f"({', '.join(f'{n} {r}' for r, n in self.skipped.items()) or 'none recorded'})")
                 return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), problem)
-            odometry = self._odometry_at(stamps)
+            order = self._order(stamps)
+            odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
             t0 = time.perf_counter()
-            front = self._register(stamps, points, odometry)
+            front = self._register(stamps[order], [points[i] for i in order],
+                                   None if odometry is None else (odometry[0][order], odometry[1][order]))
             elapsed_s = time.perf_counter() - t0
-            trajectory = Trajectory(stamps, pose2tform(front.run.poses()))
+            poses = np.empty((len(stamps), 3))
+            poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
+            trajectory = Trajectory(stamps, pose2tform(poses))
             odom_traj = None if odometry is None else Trajectory(stamps, odometry[0])
             self.warnings.extend(front.warnings(self.options.topic))
             if len(stamps) == 1:
@@ -211,15 +218,18 @@ class NdtOdomPipeline:
         collector = TfCollector()
         collector.check(bag)
         odom_samples = []
+        odom_seqs: list[int | None] = []
         has_odom_topic = (self.options.use_odometry and ODOM_TOPIC in bag.topics
                           and bag.topics[ODOM_TOPIC].msgtype in ODOMETRY_TYPES)
         topics = [t for t in collector.topics if t in bag.topics] + ([ODOM_TOPIC] if has_odom_topic else [])
         for rec in bag.messages(topics):
             if rec.topic == ODOM_TOPIC:
                 odom_samples.append(decode_odometry(rec.msg))
+                odom_seqs.append(getattr(rec.msg.header, "seq", None))
             else:
                 collector.add(rec)
         dynamic, static = collector.arrays()
+        late_ns = self._late_odometry(odom_samples, odom_seqs)
         parents = np.array([p.lstrip("/") for p in dynamic.parent], dtype=object)
         children = np.array([c.lstrip("/") for c in dynamic.child], dtype=object)
         if odom_samples:
@@ -232,8 +242,12 @@ class NdtOdomPipeline:
             edge = (parents == self.odom_frame) & (children == self.base_frame)
             if edge.any():
                 self.odometry_source = f"/tf {self.odom_frame} -> {self.base_frame}"
+                self._raw_odometry = dynamic.select(edge)
+                if late_ns.size:  # /odom's seq says which of the edge's samples are stamped out of order
+                    dynamic = dynamic.select(~(edge & np.isin(dynamic.stamp_ns, late_ns)))
                 dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
             elif odom_samples:
+                odom_samples = [s for s in odom_samples if s.stamp_ns not in set(late_ns.tolist())]
                 n = len(odom_samples)
                 dynamic = TfArrays.concatenate([dynamic, TfArrays(
                     np.full(n, self.odom_frame, dtype=object), np.full(n, self.base_frame, dtype=object),
@@ -251,23 +265,40 @@ class NdtOdomPipeline:
         """Stamps (N,) int64 and valid points (M_k,2) of the usable scans, in bag order."""
         stamps: list[int] = []
         points: list[np.ndarray] = []
+        seqs: list[int | None] = []
         stream = ScanStream(bag, self.options.topic, increasing=True, min_returns=MIN_SCAN_POINTS, desc="reading scans")
         for item in stream:
             if not self.scan_frame:
                 self.scan_frame = item.scan.frame_id.lstrip("/")
             stamps.append(item.scan.stamp_ns)
+            seqs.append(item.seq)
             points.append(item.scan.points_xy())
             if self.keep_scans:
                 self.scans.append(item.scan)
         self.skipped = dict(stream.skipped)
         self.warnings.extend(stream.warnings())
+        self.seqs = seqs
         return np.asarray(stamps, dtype=np.int64), points
+
+    def _order(self, stamps: np.ndarray) -> np.ndarray:
+        """The order to register the scans in: their recording order (:func:`~bagtools.dataset.recording_order`)
+        when their stamps disagree with it, else the order read."""
+        order = recording_order(stamps, self.seqs)
+        if order is None:
+            return np.arange(len(stamps))
+        moved = int(np.count_nonzero(np.diff(stamps[order]) < 0))  # scans stamped before the one recorded before them
+        self.warnings.append(f"{moved} scan(s) on {self.options.topic} are stamped before the scan recorded before "
+                             "them (header.seq): registered in recording order, each posed at its own stamp")
+        self.reordered = moved
+        return order
 
     def _scan_offset(self, stamps: np.ndarray) -> None:
         """T_base_scan: from --scan-frame-offset, else tf, else identity with a warning."""
         if self.options.scan_frame_offset is not None:
             self.T_base_scan = pose2tform(np.asarray(self.options.scan_frame_offset, dtype=np.float64))
             return
+        if self.base_frame is None and self.scan_frame and self.buffer is not None:
+            self.base_frame = self._static_root(self.scan_frame)
         if self.base_frame is None or self.base_frame == self.scan_frame or not self.scan_frame:
             return
         if self.buffer is None:
@@ -282,11 +313,55 @@ class NdtOdomPipeline:
         self.warnings.append(NO_SCAN_TRANSFORM_WARNING.format(base=self.base_frame, scan_frame=self.scan_frame)
                              + " (give --scan-frame-offset X,Y,YAW to set it)")
 
+    def _static_root(self, frame: str) -> str | None:
+        """The robot frame a sensor frame is mounted on: the top of its chain of static parents (``base_link``
+        for ``laser`` when /tf_static gives base_link -> laser), or None when it has no static parent."""
+        root = None
+        while self.buffer.has_frame(frame) and self.buffer.is_static(frame):
+            parent = self.buffer.parent(frame)
+            if parent is None or parent == root:
+                break
+            root = frame = parent
+        return root
+
     def _has_odometry(self) -> bool:
         return self.odometry_source is not None
 
-    def _odometry_at(self, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """(T_odom_base (N,4,4), valid (N,)) at the scan stamps; stamps outside the data take the nearest end."""
+    def _late_odometry(self, samples: list, seqs: list[int | None]) -> np.ndarray:
+        """Stamps (ns) of the odometry samples stamped before a sample recorded before them (by /odom's
+        header.seq): in stamp order they would put the robot back and forth, so they are not used."""
+        if not samples:
+            return np.zeros(0, dtype=np.int64)
+        stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
+        order = recording_order(stamps, seqs)
+        if order is None:
+            return np.zeros(0, dtype=np.int64)
+        late = stamps[stamped_late(stamps, order)]
+        self.warnings.append(f"{late.size} odometry sample(s) on {ODOM_TOPIC} are stamped before a sample recorded "
+                             "before them (header.seq): not used")
+        return late
+
+    def _own_odometry(self, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T_odom_base (N,4,4), found (N,)): the odometry sample recorded at each very stamp, as recorded."""
+        raw = self._raw_odometry
+        T = np.tile(np.eye(4), (len(stamps), 1, 1))
+        if raw is None or len(raw) == 0:
+            return T, np.zeros(len(stamps), dtype=bool)
+        order = np.argsort(raw.stamp_ns, kind="stable")
+        at = np.clip(np.searchsorted(raw.stamp_ns[order], stamps), 0, len(raw) - 1)
+        rows = order[at]
+        found = raw.stamp_ns[rows] == stamps
+        T[found] = quat2tform(xyzw2quat(raw.rotation_xyzw[rows[found]]))
+        T[found, :3, 3] = raw.translation[rows[found]]
+        return T, found
+
+    def _odometry_at(self, stamps: np.ndarray, out_of_order: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(T_odom_base (N,4,4), valid (N,)) at the scan stamps; stamps outside the data take the nearest end.
+
+        A scan stamped out of its recording order (``out_of_order``) had its odometry stamped the same way:
+        the stream interpolated at its stamp belongs to another time (and the repair took its own sample
+        for a glitch), so it takes the sample recorded at its very stamp, or no odometry guess."""
         if not self._has_odometry() or self.buffer is None or self.base_frame is None:
             return None
         first, last = self.buffer.frame_time_range(self.base_frame) or (int(stamps[0]), int(stamps[-1]))
@@ -302,6 +377,10 @@ class NdtOdomPipeline:
             nearest = good[np.clip(np.searchsorted(good, np.arange(len(ok))), 0, good.size - 1)]
             T = T[nearest]
         valid &= ok
+        if out_of_order is not None and out_of_order.any():
+            own, found = self._own_odometry(stamps[out_of_order])
+            T[out_of_order] = own
+            valid[out_of_order] = found
         if not valid.all():
             self.warnings.append(f"{int((~valid).sum())} scan(s) lie outside the odometry's time range: "
                                  "their guesses use constant velocity")
@@ -387,6 +466,7 @@ class NdtOdomPipeline:
             "reference": self.options.reference,
             "scans_used": len(steps),
             "scans_skipped": dict(self.skipped),
+            "scans_out_of_recording_order": self.reordered,
             "options": asdict(self.options),
             "warnings": self.warnings,
         }

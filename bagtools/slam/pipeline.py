@@ -231,7 +231,10 @@ class SlamPipeline:
                 poses[k] = se2_compose(nodes[last], se2_between(steps[int(back.keyframe_steps[last])].pose, s.pose))
         poses[:, 2] = wrap_to_pi(poses[:, 2])
         stamps = front.stamps_ns()
-        return Trajectory(stamps, pose2tform(poses).reshape(-1, 4, 4)), Trajectory(stamps, pose2tform(front.poses()).reshape(-1, 4, 4))
+        by_stamp = np.argsort(stamps, kind="stable")  # the steps are in recording order (see ndt-odom's _order)
+        stamps = stamps[by_stamp]
+        return (Trajectory(stamps, pose2tform(poses[by_stamp]).reshape(-1, 4, 4)),
+                Trajectory(stamps, pose2tform(front.poses()[by_stamp]).reshape(-1, 4, 4)))
 
     def _map(self, trajectory: Trajectory, base_frame: str | None) -> tuple[OccupancyGrid, dict]:
         """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of)."""
@@ -289,6 +292,7 @@ class SlamPipeline:
             "topic": self.options.topic,
             "frame": "map: the front end's odometry frame at the first scan (the first keyframe held at its pose)",
             "scans": len(front.steps),
+            "duration_s": float(np.ptp(front.stamps_ns()) / 1e9) if front.steps else 0.0,
             "keyframes": graph.n_nodes,
             "front_end": front_summary,
             "graph": {

@@ -204,3 +204,33 @@ def test_bad_options_are_one_line_errors() -> None:
                          ({"init": "gps"}, "--init"), ({"reference": "map"}, "--reference")):
         with pytest.raises(BagtoolsError, match=text):
             NdtOdomOptions(**kwargs)
+
+
+def test_without_odometry_the_trajectory_is_the_base_where_tf_static_mounts_the_laser(tmp_path: Path,
+                                                                                       lap_truth) -> None:
+    """No odom -> base transform, but /tf_static base_link -> base_scan: the poses are base_link's, not the laser's."""
+    from bagtools.transforms import se2_between, tform2pose
+    from simulate.world import load_world
+
+    stamps, T_map_base = lap_truth
+    mount = np.array([0.3, 0.1, 0.4])  # x, y, yaw of the laser on the base: far enough off to show
+    T_base_scan = pose2tform(mount)
+    world, lidar, rng = load_world("turtlebot3_world"), Lidar(), np.random.default_rng(0)
+    quat_xyzw = (0.0, 0.0, np.sin(mount[2] / 2), np.cos(mount[2] / 2))
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", int(stamps[0]) - 1,
+             make_tf(int(stamps[0]) - 1, "base_link", "base_scan", (mount[0], mount[1], 0.1), quat_xyzw))]
+    for stamp, T in zip(stamps[::3], T_map_base[::3]):
+        x, y, yaw = tform2pose(T @ T_base_scan)
+        msgs.append(("/scan", SCAN, int(stamp), make_scan(int(stamp), lidar.scan(world, (x, y, 0.2, yaw), rng),
+                                                           lidar.angle_min_rad, lidar.angle_increment_rad)))
+    bag = write_bag(tmp_path / "mounted", msgs)
+    result = NdtOdomPipeline(bag, NdtOdomOptions()).run()
+    s = result.summary
+    assert s["base_frame"] == "base_link" and s["scan_frame"] == "base_scan" and not s["odometry_used"]
+    np.testing.assert_allclose(s["T_base_scan_xyz_yaw"], [0.3, 0.1, 0.1, 0.4], atol=1e-9)
+    est = tform2pose(result.trajectory.poses).reshape(-1, 3)
+    truth = tform2pose(T_map_base[::3]).reshape(-1, 3)
+    err = se2_between(se2_between(truth[0], truth), se2_between(est[0], est))
+    assert np.hypot(err[:, 0], err[:, 1]).max() < 0.05  # the laser's own path would be off by up to 0.6 m
+    write_ndt_odom(result, tmp_path / "out")
+    assert (tmp_path / "out" / "trajectory.tum").read_text().splitlines()[0].endswith("body: base_link")

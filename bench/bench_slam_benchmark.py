@@ -1,0 +1,77 @@
+"""``bagtools slam`` on the classic 2D SLAM benchmark logs (Kümmerle et al. 2009), with default options.
+
+For each log in ``../shared/data/benchmark`` (ACES, Intel Research Lab, Freiburg
+079; skipped when absent), with its wheel odometry and scans only, one whole
+``bagtools slam --relations`` command in its own process:
+
+- the relations error (the paper's metric, exact stamps, every relation
+  scored): mean, standard deviation in the measure's text, and max. Baseline
+  in the same run: the front end alone (the laser odometry the graph starts
+  from). Targets: the mean at most 1.25x Cartographer's published figure (Hess
+  et al. 2016, Table I), no relation over 1 m, none missing;
+- speed: seconds of log per CPU second of the whole command (one core).
+  Baseline: the front end's share of the same run. Target >= 20x;
+- peak resident memory of the command. Baseline: ``bagtools info`` on the same
+  bag (what reading it costs). Target <= 1 GB.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from bench.common import Row
+
+BENCHMARK_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "benchmark"
+#: Cartographer's mean relations error per log, metres (Hess, Kohler, Rapp, Andor, ICRA 2016, Table I).
+CARTOGRAPHER_M = {"aces": 0.0375, "intel": 0.0229, "fr079": 0.0452}
+
+
+def _run(argv: list[str]) -> tuple[float, float, str]:
+    """(CPU seconds, peak RSS in MB, stderr) of ``python -m bagtools ARGV`` in a child process."""
+    proc = subprocess.Popen([sys.executable, "-m", "bagtools", *argv], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    err = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(f"bagtools {' '.join(argv)} failed: {err.strip()[-500:]}")
+    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0, err
+
+
+def run(quick: bool) -> list[Row]:
+    rows: list[Row] = []
+    if quick or not BENCHMARK_DIR.is_dir():
+        return rows
+    with tempfile.TemporaryDirectory(prefix="bench_slam_benchmark_") as tmp:
+        for name, cartographer in CARTOGRAPHER_M.items():
+            bag, relations = BENCHMARK_DIR / f"{name}.bag", BENCHMARK_DIR / f"{name}.relations"
+            if not bag.is_file() or not relations.is_file():
+                continue
+            _, info_rss, _ = _run(["info", str(bag)])
+            for mode, flags in (("with odometry", []), ("scans only", ["--no-odometry"])):
+                out = Path(tmp) / f"{name}_{mode.replace(' ', '_')}"
+                cpu_s, rss_mb, _ = _run(["slam", str(bag), "--out", str(out), "--relations", str(relations),
+                                         "--no-mcap", *flags])
+                s = json.loads((out / "summary.json").read_text())
+                slam, front = s["relations"]["slam"], s["relations"]["front_end"]
+                duration_s = s["duration_s"]
+                label = f"{name}, {mode}"
+                rows.append(Row("slam benchmark", f"relations error mean, {label} (+- {slam['trans_std_m']:.4f} m; "
+                                                  f"{slam['used']} of {slam['relations']} scored)",
+                                slam["trans_mean_m"], "m", "front end alone", front["trans_mean_m"], False,
+                                f"<= {1.25 * cartographer:.4f} m (1.25x Cartographer's {cartographer} m)"))
+                rows.append(Row("slam benchmark", f"relations error max, {label}", slam["trans_max_m"], "m",
+                                "front end alone", front["trans_max_m"], False, "<= 1 m"))
+                front_s = s["timing_s"]["front_end"]
+                rows.append(Row("slam benchmark", f"log seconds per CPU second, whole command, {label} "
+                                                  f"({duration_s:.0f} s, {s['scans']} scans)",
+                                duration_s / cpu_s, "x real time", "the front end's share", duration_s / front_s,
+                                True, ">= 20"))
+                rows.append(Row("slam benchmark", f"peak RSS, {label}", rss_mb, "MB", "bagtools info, same bag",
+                                info_rss, False, "<= 1024 MB"))
+    return rows
