@@ -78,6 +78,9 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     ctx = click.get_current_context()
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the embedded cluster; a --scheduler's cluster has its own workers", ctx)
+    if scheduler is not None and not scheduler.strip():
+        raise click.UsageError("--scheduler is empty: give the cluster's address (tcp://host:8786), or leave the "
+                               "option out for a cluster on this machine", ctx)
     params = _command_params(command, list(ctx.meta.get(_COMMAND_ARGS, [])))
     plan = plan_batch(command, bags, out_dir, params, force, available=set(COMMANDS))
     done_before = len(plan.decided)

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import click
+
+
+#: How far from the robot base a laser can be mounted (m): farther is a typo or damage, and would size grids by it.
+MAX_SCAN_FRAME_OFFSET_M = 100.0
 
 
 def scan_frame_offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
@@ -13,6 +19,9 @@ def scan_frame_offset(ctx: click.Context, param: click.Parameter, value: str | N
         x, y, yaw = (float(v) for v in value.split(","))
     except ValueError:
         raise click.BadParameter(f"expected X,Y,YAW (metres, metres, radians), got {value!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)) or max(abs(x), abs(y)) > MAX_SCAN_FRAME_OFFSET_M:
+        raise click.BadParameter(f"expected a laser on the robot: X and Y finite and within "
+                                 f"{MAX_SCAN_FRAME_OFFSET_M:g} m of the base, YAW finite, got {value!r}")
     return (x, y, yaw)
 
 

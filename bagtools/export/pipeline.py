@@ -46,6 +46,9 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
     fmt = output_format(out)
     with open_bag(bag_path) as bag:
         info = bag.require_topic(topic)
+        if info.count == 0:
+            raise TopicError(f"topic '{topic}' ({info.msgtype}) has no messages, so there is nothing to export",
+                             bag.path)
         rows_of = ROWS.get(info.msgtype)
         if rows_of is None:
             kinds = "LaserScan, PointCloud2, Odometry, TF (TFMessage) and PointStamped"

@@ -35,6 +35,15 @@ def stamp_to_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def sensor_stamp_ns(header: Any, what: str) -> int:
+    """A sensor message's header stamp in ns; :class:`DecodeError` for a stamp before 1970 (a negative time),
+    which places the data nowhere and no bag or MCAP file can hold."""
+    stamp_ns = stamp_to_ns(header.stamp)
+    if stamp_ns < 0:
+        raise DecodeError(f"{what} header stamp {stamp_ns / 1e9:.9f} s is negative")
+    return stamp_ns
+
+
 #: Returns beyond this are not believed, whatever a scan's range_max says (no 2D laser reaches 1 km).
 MAX_PLAUSIBLE_RANGE_M = 1000.0
 #: Cloud points farther than this from their sensor on any axis are damage (or a wrong is_bigendian), not data.
@@ -127,13 +136,14 @@ def decode_laserscan(msg: Any) -> LaserScanArrays:
     """sensor_msgs/LaserScan -> :class:`LaserScanArrays` (ranges are not copied).
 
     Raises :class:`DecodeError` for a geometry no beam can be placed by
-    (non-finite angle_min or angle_increment, a zero increment).
+    (non-finite angle_min or angle_increment, a zero increment) and for a negative header stamp.
     """
+    stamp_ns = sensor_stamp_ns(msg.header, "LaserScan")
     ranges = np.asarray(msg.ranges, dtype=np.float32)
     angles, low, high, notes = _scan_geometry(float(msg.angle_min), float(msg.angle_increment), float(msg.angle_max),
                                               int(ranges.size), float(msg.range_min), float(msg.range_max))
     return LaserScanArrays(
-        stamp_ns=stamp_to_ns(msg.header.stamp),
+        stamp_ns=stamp_ns,
         frame_id=msg.header.frame_id,
         ranges_m=ranges,
         angles_rad=angles,
@@ -304,7 +314,7 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False, attributes: bool = Fals
     size, expected = len(msg.data), int(msg.height) * int(msg.row_step)
     notes = () if size == expected or int(msg.height) * int(msg.width) == 0 else (
         f"PointCloud2 data holds {size} bytes, not height x row_step = {expected}",)
-    return CloudArrays(stamp_to_ns(msg.header.stamp), msg.header.frame_id, points, n_implausible, notes,
+    return CloudArrays(sensor_stamp_ns(msg.header, "PointCloud2"), msg.header.frame_id, points, n_implausible, notes,
                        intensity, rgb)
 
 

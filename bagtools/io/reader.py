@@ -30,6 +30,7 @@ from typing import Any
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag1 import ReaderError as Rosbag1ReaderError
 from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+from rosbags.serde import SerdeError
 from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
@@ -57,7 +58,8 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 _KIND_BY_MAGIC = {MCAP_MAGIC: "mcap", ROS1_MAGIC: "ros1", SQLITE_MAGIC: "sqlite3"}
 _SUFFIX_BY_KIND = {"mcap": ".mcap", "ros1": ".bag", "sqlite3": ".db3"}
 # What rosbags (and apsw, numpy, zstd underneath) raise on damaged files and messages.
-_READ_ERRORS = (AnyReaderError, Rosbag1ReaderError, Rosbag2ReaderError, TypesysError, OSError, KeyError, ValueError,
+_READ_ERRORS = (AnyReaderError, Rosbag1ReaderError, Rosbag2ReaderError, TypesysError, SerdeError, OSError, KeyError,
+                ValueError,
                 TypeError, AssertionError, IndexError, AttributeError, OverflowError, MemoryError, EOFError,
                 struct.error, *_apsw_errors())
 
@@ -166,7 +168,8 @@ class _McapSource:
         self.topics: dict[str, TopicInfo] = {}
         self._channels: dict[int, tuple[str, str]] = {}  # channel id -> (topic, msgtype)
         skipped: dict[str, int] = {}
-        for channel_id, count in sorted(self.scan.counts.items()):
+        for channel_id in sorted(set(self.scan.counts) | set(self.scan.channels)):  # topics with 0 messages too
+            count = self.scan.counts.get(channel_id, 0)
             channel = self.scan.channels.get(channel_id)
             schema = self.scan.schemas.get(channel.schema_id) if channel is not None else None
             if channel is None or schema is None or schema.name in unusable:

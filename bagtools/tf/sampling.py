@@ -25,6 +25,8 @@ def sample_stamps(first_ns: int, last_ns: int, rate_hz: float, bytes_per_step: i
     if last_ns < first_ns:
         return np.empty(0, dtype=np.int64)
     step = 1e9 / rate_hz
+    if not np.isfinite(step):  # a rate so low that one step is longer than any span: the first stamp only
+        return np.array([first_ns], dtype=np.int64)
     count_f = np.floor((last_ns - first_ns) / step) + 1
     check_memory(count_f * bytes_per_step, f"{count_f:.3g} time steps at {rate_hz:g} Hz over {(last_ns - first_ns) / 1e9:.6g} s",
                  "lower --rate")

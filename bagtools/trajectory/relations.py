@@ -40,6 +40,7 @@ RELATION_FIELDS = 8
 #: A pose of the estimate is at a relation's stamp when it is this close (ns): the stamp's printed microseconds
 #: and a float's rounding of them, well below the milliseconds between two scans of a log.
 RELATION_MAX_DIFF_NS = 100_000
+_MAX_STAMP_NS = int(np.iinfo(np.int64).max)
 
 
 @dataclass(frozen=True)
@@ -59,9 +60,13 @@ def read_relations(path: str | Path) -> Relations:
     """Read a ``.relations`` file (see the module docstring); blank lines and ``#`` comments are skipped.
 
     Raises:
-        BagtoolsError: the file cannot be read, a line is not 8 numbers, or it holds no relation.
+        BagtoolsError: the file is not a regular file (a FIFO would block, a device never end) or cannot be
+            read, a line is not 8 numbers or has a stamp beyond int64 nanoseconds, or it holds no relation.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise BagtoolsError("is not a regular file (a relations file is text: stamp_1 stamp_2 x y z roll pitch yaw)",
+                            path)
     try:
         text = path.read_text(errors="replace")
     except OSError as err:
@@ -82,6 +87,8 @@ def read_relations(path: str | Path) -> Relations:
                                 path) from None
         if not all(np.isfinite(values)):
             raise BagtoolsError(f"line {number} holds a value that is not finite", path)
+        if not all(0 <= t <= _MAX_STAMP_NS for t in (t1, t2)):
+            raise BagtoolsError(f"line {number} has a stamp outside 0 .. {_MAX_STAMP_NS / 1e9:.0f} s", path)
         first.append(t1)
         second.append(t2)
         motion.append((values[0], values[1], values[5]))
@@ -130,7 +137,7 @@ def relation_errors(relations: Relations, estimate: Trajectory, max_diff_ns: int
     at2 = np.full(len(relations), -1, dtype=np.int64)
     at1[i1], at2[i2] = j1, j2
     found = (at1 >= 0) & (at2 >= 0)
-    same = found & (at1 == at2) & (relations.first_ns != relations.second_ns)
+    same = found & (at1 == at2)  # equal stamps too: a relation of no motion scores nothing
     ok = found & ~same
     out.update(used=int(ok.sum()), missing=int((~found).sum()), same_pose=int(same.sum()))
     if found.any() and not ok.any():

@@ -55,6 +55,8 @@ def test_help_has_an_example(capsys) -> None:
     (["grid", "{root}/nothing*"], "matches no file or directory"),
     (["grid", "{bag}", "--workers", "0"], "invalid value for '--workers'"),
     (["grid", "{bag}", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the embedded cluster"),
+    (["grid", "{bag}", "--scheduler", ""], "--scheduler is empty"),
+    (["grid", "{bag}", "--scheduler", "  "], "--scheduler is empty"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2_before_any_work(args: list[str], problem: str, fleet: Fleet,
                                                                tmp_path: Path, capsys) -> None:

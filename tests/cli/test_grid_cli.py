@@ -155,3 +155,21 @@ def test_real_turtlebot3_bag_warns_about_the_scan_frame(real_dir: Path, tmp_path
             "assuming the scan frame is the base frame") in err.splitlines()
     assert "scans mapped" in out
     assert read_nav2_map(tmp_path / "o" / "map.yaml").ternary().max() == 1
+
+
+def test_a_scan_with_a_negative_stamp_is_skipped_before_the_work_not_a_failure_after_it(tmp_path: Path,
+                                                                                          capsys) -> None:
+    """The results.mcap writer cannot hold a time before 1970: the scan is skipped and counted when read, so the
+    run ends well (it used to fail after all the work, in the writer)."""
+    t0 = 1_700_000_000_000_000_000
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", t0 + i * 100_000_000,
+             make_tf(t0 + i * 100_000_000, "map", "base_scan", (0.01 * i, 0, 0), (0, 0, 0, 1))) for i in range(20)]
+    ranges = np.full(360, 2.0, dtype=np.float32)
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", t0 + i * 200_000_000 + 1, make_scan(t0 + i * 200_000_000, ranges))
+             for i in range(1, 9)]
+    msgs.append(("/scan", "sensor_msgs/msg/LaserScan", t0 + 5, make_scan(-2_000_000_000, ranges)))
+    bag = write_bag(tmp_path / "negative", sorted(msgs, key=lambda m: m[2]))
+    code, out, err = run(["grid", str(bag), "--out", str(tmp_path / "out")], capsys)
+    assert code == 0, err
+    assert "unusable header: LaserScan header stamp -2.000000000 s is negative" in err
+    assert (tmp_path / "out" / "results.mcap").is_file()

@@ -169,3 +169,15 @@ def test_tf_commands_report_a_truncated_mcap(drive_bag: Path, tmp_path: Path, ca
         code, _, err = run(argv, capsys)
         assert code == 0, argv
         assert "warning: " in err and "truncated MCAP" in err and "recovered" in err, argv
+
+
+def test_a_rate_too_low_for_a_second_sample_gives_the_first_one_and_no_warning(drive_bag: Path, capsys) -> None:
+    """--rate 1e-300: one step is longer than any span (1e309 ns overflows to inf), so one sample, and no numpy
+    RuntimeWarning (0 * inf) on stderr."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code, out, err = run(["tf", "echo", str(drive_bag), "odom", "base_footprint", "--rate", "1e-300"], capsys)
+    assert code == 0 and err == "", err
+    assert out.count("At time") == 1, out

@@ -81,3 +81,13 @@ def test_tf_message() -> None:
     assert arrays.stamp_ns.tolist() == [1_500_000_000]
     np.testing.assert_allclose(arrays.translation, [[1, 2, 3]])
     np.testing.assert_allclose(arrays.rotation_xyzw, [[0, 0, 0.6, 0.8]])
+
+
+def test_a_negative_header_stamp_is_an_unusable_sensor_message() -> None:
+    """Before 1970: it places the data nowhere and no MCAP file can hold it (log times are unsigned)."""
+    scan = make_scan(-1_500_000_000, np.full(10, 1.0, dtype=np.float32))
+    with pytest.raises(DecodeError, match="LaserScan header stamp -1.500000000 s is negative"):
+        decode_laserscan(scan)
+    cloud = make_cloud(-1, np.zeros((3, 3)))
+    with pytest.raises(DecodeError, match="PointCloud2 header stamp .* is negative"):
+        decode_pointcloud2(cloud)

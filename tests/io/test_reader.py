@@ -202,3 +202,52 @@ def test_real_turtlebot3_scan_and_odom(real_dir: Path) -> None:
     assert valid.size > 0 and valid.min() >= 0.092 and valid.max() <= 3.0
     assert (odom.frame_id, odom.child_frame_id) == ("odom", "base_link")
     np.testing.assert_allclose(np.linalg.norm(odom.orientation_xyzw), 1.0, atol=1e-6)
+
+
+def test_undecodable_cdr_is_a_skipped_message_and_a_warning_never_a_traceback(tmp_path: Path, capsys) -> None:
+    """CDR whose string length points past the message (rosbags' SerdeError): info, export and the readers skip it
+    and say so; the commands end with exit 0 and a warning, not an internal error."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from bagtools.cli import main
+    from tests.conftest import make_scan
+
+    path = tmp_path / "bad_cdr"
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    with writer:
+        conn = writer.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=TYPESTORE)
+        for i in range(5):
+            t = 1_700_000_000_000_000_000 + i * 100_000_000
+            data = TYPESTORE.serialize_cdr(make_scan(t, np.full(360, 2.0, dtype=np.float32)), "sensor_msgs/msg/LaserScan")
+            writer.write(conn, t, b"\x00\x01\x00\x00" + b"\xff" * 40 if i == 2 else data)
+    with open_bag(path) as bag:
+        assert len(list(bag.messages(["/scan"]))) == 4
+        assert any("cannot be decoded" in w and "1 on /scan" in w for w in bag.warnings)
+    for argv in (["info", str(path)], ["export", str(path), "/scan", "--out", str(tmp_path / "scans.csv")]):
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exit_info.value.code == 0 and "internal error" not in err and "Traceback" not in err, err
+
+
+def test_a_topic_with_no_messages_is_listed_and_export_says_it_is_empty(tmp_path: Path, capsys) -> None:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from bagtools.cli import main
+    from tests.conftest import make_scan
+
+    path = tmp_path / "empty_topic"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        scan = writer.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=TYPESTORE)
+        writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=TYPESTORE)
+        writer.write(scan, 10**18, TYPESTORE.serialize_cdr(make_scan(10**18, np.ones(10, np.float32)),
+                                                          "sensor_msgs/msg/LaserScan"))
+    with open_bag(path) as bag:
+        assert bag.topics["/odom"].count == 0 and bag.topics["/scan"].count == 1
+    with pytest.raises(SystemExit):
+        main(["info", str(path)])
+    assert "/odom  nav_msgs/msg/Odometry            0" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exit_info:
+        main(["export", str(path), "/odom", "--out", str(tmp_path / "odom.csv")])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "topic '/odom' (nav_msgs/msg/Odometry) has no messages" in err, err

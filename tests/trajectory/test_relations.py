@@ -102,6 +102,29 @@ def test_relations_whose_stamps_meet_one_pose_are_counted_not_scored_as_no_motio
     assert only["used"] == 0 and "both stamps at one pose" in only["unavailable"]
 
 
+def test_a_relation_with_two_equal_stamps_is_counted_as_same_pose_not_scored() -> None:
+    """A line whose two stamps are equal names no motion: scored, it would add its motion's length as error (or
+    nothing for a zero motion, a free perfect relation)."""
+    truth = _trajectory(_path())
+    rel = relations_from_trajectory(truth, np.array([[0, 1], [2, 3]]))
+    rel.second_ns[1] = rel.first_ns[1]
+    scored = relation_errors(rel, truth)
+    assert scored["used"] == 1 and scored["same_pose"] == 1 and scored["missing"] == 0
+
+
+@pytest.mark.parametrize("kind", ["fifo", "directory", "device"])
+def test_a_relations_path_that_is_not_a_regular_file_is_refused_before_reading(tmp_path: Path, kind: str) -> None:
+    """A FIFO would block forever and /dev/zero read until memory runs out: regular files only."""
+    import os
+
+    path = {"fifo": tmp_path / "rel.fifo", "directory": tmp_path, "device": Path("/dev/zero")}[kind]
+    if kind == "fifo":
+        os.mkfifo(path)
+    with pytest.raises(BagtoolsError, match="is not a regular file") as info:
+        read_relations(path)
+    assert info.value.path == str(path)
+
+
 def test_a_relation_names_scans_by_their_exact_stamps() -> None:
     """A relation's stamp 3 ms from a pose names another scan of the log (the Intel log stamps scans in bursts,
     0.3 m apart for 3 ms): by default it is missing, not scored against the neighbouring pose; a stamp
@@ -126,6 +149,7 @@ def test_a_relation_names_scans_by_their_exact_stamps() -> None:
     ("1.0 2.0 0.1 0.2 0 0 0 0.1\n1.0 2.0 x 0.2 0 0 0 0.1\n", "line 2 is not a relation"),
     ("-1.0 2.0 0.1 0.2 0 0 0 0.1\n", "line 1 is not a relation"),
     ("1.0 2.0 nan 0.2 0 0 0 0.1\n", "line 1 holds a value that is not finite"),
+    ("1234567890123456789012345678901.0 2.0 0.1 0.2 0 0 0 0.1\n", "line 1 has a stamp outside 0 .. 9223372037 s"),
 ])
 def test_bad_files_are_one_line_errors_naming_the_file(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "bad.relations"
