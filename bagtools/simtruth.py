@@ -46,14 +46,19 @@ def load_sim_world(bag: BagReader) -> World | None:
     return World.from_dict(info["world"], path=bag.path)
 
 
+#: A reference moving faster than this (m/s), plus the floor (m), between two samples has jumped (a reset, a
+#: relocalization, damage): no mobile robot the tools are for drives that fast.
+GROUND_TRUTH_MAX_SPEED_MPS, GROUND_TRUTH_JUMP_FLOOR_M = 20.0, 1.0
+
+
 def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
                       warnings: list[str] | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
     """The reference poses of a bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
 
     Read from nav_msgs/Odometry on ``topic`` (the pose of the base in map).
     Samples with a non-finite value, a quaternion far from unit length or a
-    stamp seen before are dropped, and said in ``warnings`` when given; None
-    when no sample is left.
+    stamp seen before are dropped, and said in ``warnings`` when given, as are
+    jumps faster than ``GROUND_TRUTH_MAX_SPEED_MPS``; None when no sample is left.
     """
     if topic not in bag.topics or bag.topics[topic].msgtype not in ODOMETRY_TYPES:
         return None
@@ -73,6 +78,16 @@ def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
                         "1e6 m, not a unit quaternion, or a repeated stamp)")
     if order.size == 0:
         return None
+    if warnings is not None and order.size > 1:
+        step_m = np.linalg.norm(np.diff(xyz[order], axis=0), axis=1)
+        dt_s = np.diff(stamps[order]) / 1e9
+        jumps = np.flatnonzero(step_m > GROUND_TRUTH_MAX_SPEED_MPS * dt_s + GROUND_TRUTH_JUMP_FLOOR_M)
+        if jumps.size:
+            k = int(jumps[np.argmax(step_m[jumps])])
+            warnings.append(f"{topic}: the reference jumps {jumps.size} time(s), up to {step_m[k]:.3g} m in "
+                            f"{dt_s[k]:.3g} s (at {stamps[order][k + 1] / 1e9:.3f} s): faster than "
+                            f"{GROUND_TRUTH_MAX_SPEED_MPS:g} m/s, no robot's motion; errors against it are not the "
+                            "estimate's")
     T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))
     T[:, :3, 3] = xyz[order]
     return stamps[order], T, samples[0].child_frame_id

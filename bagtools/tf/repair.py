@@ -346,6 +346,33 @@ def parent_conflicts(dynamic: TfArrays | None, static: TfArrays | None) -> list[
             named = ", ".join(f"{p} on {' and '.join(sorted(t))}" for p, t in sorted(parents.items()))
             out.append(f"frame {child} has {len(parents)} parents ({named}); tf2 keeps one at a time, so lookups "
                        "through it depend on which was published last")
+    return out + static_value_conflicts(static)
+
+
+#: Two static samples of one edge differ when their translations are this far apart (m) or rotations this much (rad).
+STATIC_TOLERANCE_M, STATIC_TOLERANCE_RAD = 1e-4, 1e-4
+
+
+def static_value_conflicts(static: TfArrays | None) -> list[str]:
+    """One line per /tf_static edge given more than one value (two static publishers, or a mount changed while
+    recording): tf2 keeps the value set last, so data placed through the edge is off by their difference."""
+    out: list[str] = []
+    if static is None or not len(static):
+        return out
+    for (parent, child), rows in _edges(static).items():
+        if rows.size < 2:
+            continue
+        t, q = static.translation[rows], static.rotation_xyzw[rows]
+        q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
+        last = rows.size - 1  # rows are in stamp order, ties in bag order: the buffer keeps this one
+        dist_m = np.linalg.norm(t - t[last], axis=1)
+        angle_rad = 2.0 * np.arccos(np.clip(np.abs(q @ q[last]), 0.0, 1.0))
+        differ = (dist_m > STATIC_TOLERANCE_M) | (angle_rad > STATIC_TOLERANCE_RAD)
+        if differ.any():
+            out.append(f"/tf_static gives {parent} -> {child} {int(differ.sum()) + 1} different values (up to "
+                       f"{dist_m.max():.3g} m and {np.degrees(angle_rad.max()):.3g} deg apart); the one set last is "
+                       f"used ({', '.join(f'{v:.3g}' for v in t[last])} m), as tf2 keeps it: data placed through "
+                       "this edge may be off by that much")
     return out
 
 

@@ -156,3 +156,31 @@ def test_stray_stamp_dropped() -> None:
     kept, keep = repair_dynamic_tf(edge(xyz, yaw, stamps), warnings)
     assert np.flatnonzero(~keep).tolist() == [0]
     assert warnings == ["/tf odom -> base_link: dropped 1 sample(s) stamped far from all the others (an unset clock?)"]
+
+
+def test_a_static_edge_given_two_values_is_said_wherever_tf_is_read(tmp_path) -> None:
+    """Two /tf_static messages mount the camera 2.89 m apart: map-cloud's points move by that much, so the buffer,
+    info and tf frames say so, and which value is used (the one set last, as tf2)."""
+    from bagtools.tf import TfBuffer
+    from bagtools.tf.repair import tf_conflicts
+    from tests.conftest import make_tf, write_bag
+
+    t0 = 1_700_000_000_000_000_000
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", t0, make_tf(t0, "base_link", "camera", (0.1, 0, 0.3), (0, 0, 0, 1))),
+            ("/tf_static", "tf2_msgs/msg/TFMessage", t0 + 1, make_tf(t0, "base_link", "camera", (2.99, 0, 0.3),
+                                                                     (0, 0, 0, 1))),
+            ("/tf_static", "tf2_msgs/msg/TFMessage", t0 + 2, make_tf(t0, "base_link", "laser", (0.2, 0, 0.1),
+                                                                     (0, 0, 0, 1))),
+            ("/tf_static", "tf2_msgs/msg/TFMessage", t0 + 3, make_tf(t0, "base_link", "laser", (0.2, 0, 0.1),
+                                                                     (0, 0, 0, 1)))]
+    bag = write_bag(tmp_path / "two_mounts", msgs)
+    buffer = TfBuffer.from_bag(bag)
+    said = [w for w in buffer.warnings if "/tf_static gives" in w]
+    assert len(said) == 1 and "base_link -> camera 2 different values (up to 2.89 m" in said[0], buffer.warnings
+    assert "used (2.99, 0, 0.3 m)" in said[0]
+    np.testing.assert_allclose(buffer.lookup("base_link", "camera")[:3, 3], [2.99, 0, 0.3])
+    from bagtools.io import open_bag, read_tf_arrays
+
+    with open_bag(bag) as reader:
+        dynamic, static = read_tf_arrays(reader)
+    assert sum("/tf_static gives" in w for w in tf_conflicts(dynamic, static)) == 1
