@@ -41,6 +41,8 @@ from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, rpe_fra
 from bagtools.transforms import pose2tform, quat2tform, tform2pose, xyzw2quat
 
 INIT_MODES = ("auto", *GUESSES)
+#: Repeated (frozen) scans are warned about when the odometry moves more than this meanwhile (m).
+FROZEN_SCANS_MOVED_M = 0.5
 REFERENCE_MODES = ("previous", "keyframe")
 ODOM_TOPIC = "/odom"
 
@@ -170,6 +172,7 @@ class NdtOdomPipeline:
         self.cell_size_m: float | None = None
         self.seqs: list[int | None] = []
         self.reordered = 0
+        self.repeated = 0
         self._raw_odometry: TfArrays | None = None
 
     def run(self) -> NdtOdomResult:
@@ -196,6 +199,7 @@ class NdtOdomPipeline:
             poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
             trajectory = Trajectory(stamps, pose2tform(poses))
             odom_traj = None if odometry is None else Trajectory(stamps, odometry[0])
+            self._check_frozen(points, order, odometry)
             self.warnings.extend(front.warnings(self.options.topic))
             if len(stamps) == 1:
                 self.warnings.append(f"only one usable scan on {self.options.topic}: the trajectory is its one pose, "
@@ -326,6 +330,26 @@ class NdtOdomPipeline:
 
     def _has_odometry(self) -> bool:
         return self.odometry_source is not None
+
+    def _check_frozen(self, points: list[np.ndarray], order: np.ndarray,
+                      odometry: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Count scans that repeat the scan before them exactly, and warn when the odometry moved meanwhile.
+
+        A real laser's ranges are never bit-identical twice (noise); a driver that froze sends its last scan
+        again, and scan matching then says the robot stood still (``scans_repeated`` in the summary)."""
+        same = np.zeros(len(order), dtype=bool)
+        for k in range(1, len(order)):
+            a, b = points[order[k - 1]], points[order[k]]
+            same[k] = a.shape == b.shape and bool(np.array_equal(a, b))
+        self.repeated = int(same.sum())
+        if not self.repeated or odometry is None:
+            return
+        xy = odometry[0][order][:, :2, 3]
+        moved_m = float(np.hypot(*(xy[1:] - xy[:-1]).T)[same[1:]].sum())
+        if moved_m > FROZEN_SCANS_MOVED_M:
+            self.warnings.append(f"{self.repeated} scan(s) on {self.options.topic} repeat the scan before them exactly "
+                                 f"while the odometry moves {moved_m:.2f} m (a frozen laser driver?): their matches "
+                                 "say the robot stood still there")
 
     def _late_odometry(self, samples: list, seqs: list[int | None]) -> np.ndarray:
         """Stamps (ns) of the odometry samples stamped before a sample recorded before them (by /odom's
@@ -467,6 +491,7 @@ class NdtOdomPipeline:
             "scans_used": len(steps),
             "scans_skipped": dict(self.skipped),
             "scans_out_of_recording_order": self.reordered,
+            "scans_repeated": self.repeated,
             "options": asdict(self.options),
             "warnings": self.warnings,
         }

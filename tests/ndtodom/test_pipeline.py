@@ -234,3 +234,27 @@ def test_without_odometry_the_trajectory_is_the_base_where_tf_static_mounts_the_
     assert np.hypot(err[:, 0], err[:, 1]).max() < 0.05  # the laser's own path would be off by up to 0.6 m
     write_ndt_odom(result, tmp_path / "out")
     assert (tmp_path / "out" / "trajectory.tum").read_text().splitlines()[0].endswith("body: base_link")
+
+
+def test_scans_that_never_change_while_the_wheels_drive_are_said(tmp_path: Path) -> None:
+    """A laser driver that froze repeats its last scan: 47 identical scans while the odometry drives 4.6 m. The
+    matches say the robot stood still; the run says why its trajectory disagrees with the wheels."""
+    rng = np.random.default_rng(0)
+    ranges = (2.0 + 0.5 * rng.random(360)).astype(np.float32)
+    msgs = []
+    for i in range(48):
+        t = T0_NS + i * 200_000_000
+        T = np.eye(4)
+        T[0, 3] = 0.1 * i
+        msgs.append(("/odom", "nav_msgs/msg/Odometry", t, make_odometry(t, "odom", "base_scan", T)))
+        msgs.append(("/scan", SCAN, t + 1, make_scan(t, ranges)))
+    bag = write_bag(tmp_path / "frozen", msgs)
+    s = NdtOdomPipeline(bag, NdtOdomOptions()).run().summary
+    assert s["scans_repeated"] == 47
+    assert any("47 scan(s) on /scan repeat the scan before them exactly while the odometry moves 4.70 m" in w
+               for w in s["warnings"]), s["warnings"]
+
+
+def test_a_live_laser_repeats_no_scan(lap_run) -> None:
+    summary, _ = lap_run
+    assert summary["scans_repeated"] == 0 and not any("repeat the scan" in w for w in summary["warnings"])
