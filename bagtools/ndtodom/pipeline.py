@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,9 @@ from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, rpe_fra
 from bagtools.transforms import pose2tform, quat2tform, tform2pose, xyzw2quat
 
 INIT_MODES = ("auto", *GUESSES)
+#: Returns farther than this are not matched (m): no 2D laser places the robot better by them than by its near
+#: returns, and the search's rasters are sized by the farthest point (500 m returns needed 100 M cells).
+MATCH_MAX_RANGE_M = 100.0
 #: Repeated (frozen) scans are warned about when the odometry moves more than this meanwhile (m).
 FROZEN_SCANS_MOVED_M = 0.5
 REFERENCE_MODES = ("previous", "keyframe")
@@ -271,15 +275,22 @@ class NdtOdomPipeline:
         points: list[np.ndarray] = []
         seqs: list[int | None] = []
         stream = ScanStream(bag, self.options.topic, increasing=True, min_returns=MIN_SCAN_POINTS, desc="reading scans")
+        far = Counter()
         for item in stream:
+            xy = item.scan.points_xy()
+            near = xy[np.einsum("ij,ij->i", xy, xy) <= MATCH_MAX_RANGE_M**2]
+            if len(near) < MIN_SCAN_POINTS:
+                far[f"fewer than {MIN_SCAN_POINTS} returns within {MATCH_MAX_RANGE_M:g} m"] += 1
+                continue
             if not self.scan_frame:
                 self.scan_frame = item.scan.frame_id.lstrip("/")
             stamps.append(item.scan.stamp_ns)
             seqs.append(item.seq)
-            points.append(item.scan.points_xy())
+            points.append(near)
             if self.keep_scans:
                 self.scans.append(item.scan)
-        self.skipped = dict(stream.skipped)
+        self.skipped = dict(stream.skipped) | dict(far)
+        self.warnings.extend(f"{n} scan(s) on {self.options.topic} skipped: {why}" for why, n in far.items())
         self.warnings.extend(stream.warnings())
         self.seqs = seqs
         return np.asarray(stamps, dtype=np.int64), points

@@ -258,3 +258,19 @@ def test_scans_that_never_change_while_the_wheels_drive_are_said(tmp_path: Path)
 def test_a_live_laser_repeats_no_scan(lap_run) -> None:
     summary, _ = lap_run
     assert summary["scans_repeated"] == 0 and not any("repeat the scan" in w for w in summary["warnings"])
+
+
+def test_returns_beyond_100_m_are_not_matched(tmp_path: Path) -> None:
+    """Returns at 450-500 m sized the search's raster past its limit (an internal error): they are left out of the
+    matching, and a scan with nothing nearer is skipped and counted; a bag of only such scans is a one-line error."""
+    rng = np.random.default_rng(0)
+    msgs = []
+    for i in range(10):
+        t = T0_NS + i * 200_000_000
+        ranges = (450 + 50 * rng.random(360)).astype(np.float32)
+        scan = make_scan(t, ranges)
+        scan.range_max = 900.0
+        msgs.append(("/scan", SCAN, t + 1, scan))
+    bag = write_bag(tmp_path / "far", msgs)
+    result = NdtOdomPipeline(bag, NdtOdomOptions()).run()
+    assert result.problem is not None and "every scan was skipped (10 fewer than 5 returns within 100 m)" in result.problem
