@@ -169,7 +169,8 @@ class GridMapPipeline:
         return TrajectoryScanPoses(trajectory.stamps_ns, trajectory.poses, opts.frame, base, self.buffer, offset)
 
     def _map_scans(self, bag: BagReader) -> OccupancyGrid:
-        self.scan_stream = ScanStream(bag, self.options.topic, desc="grid")
+        # As ndt-odom and slam read them: a scan stamped at or before the one before it is placed by a wrong time.
+        self.scan_stream = ScanStream(bag, self.options.topic, increasing=True, desc="grid")
         for chunk in posed_scan_chunks(self.scan_stream, self.poses):
             usable = [(item, ranges) for item in chunk if (ranges := self._usable_ranges(item)) is not None]
             if usable:

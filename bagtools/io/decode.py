@@ -36,8 +36,12 @@ def stamp_to_ns(stamp: Any) -> int:
 
 
 def sensor_stamp_ns(header: Any, what: str) -> int:
-    """A sensor message's header stamp in ns; :class:`DecodeError` for a stamp before 1970 (a negative time),
-    which places the data nowhere and no bag or MCAP file can hold."""
+    """A sensor message's header stamp in ns; :class:`DecodeError` for a nanosec field outside [0, 1e9) (no
+    time: the stamp would run into the next second) and for a stamp before 1970 (a negative time), which places
+    the data nowhere and no bag or MCAP file can hold."""
+    nanosec = int(header.stamp.nanosec)
+    if not 0 <= nanosec < 1_000_000_000:
+        raise DecodeError(f"{what} header stamp has nanosec {nanosec}, outside 0 .. 999999999")
     stamp_ns = stamp_to_ns(header.stamp)
     if stamp_ns < 0:
         raise DecodeError(f"{what} header stamp {stamp_ns / 1e9:.9f} s is negative")

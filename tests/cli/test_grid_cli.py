@@ -173,3 +173,33 @@ def test_a_scan_with_a_negative_stamp_is_skipped_before_the_work_not_a_failure_a
     assert code == 0, err
     assert "unusable header: LaserScan header stamp -2.000000000 s is negative" in err
     assert (tmp_path / "out" / "results.mcap").is_file()
+
+
+@pytest.mark.parametrize("damage, said", [
+    ("backwards", "skipped: header stamp not after the previous scan's (time going backwards)"),
+    ("one stamp", "skipped: header stamp not after the previous scan's (time going backwards)"),
+    ("nanosec", "unusable header: LaserScan header stamp has nanosec 1500000000, outside 0 .. 999999999"),
+])
+def test_grid_refuses_the_scan_timing_ndt_odom_and_slam_refuse(damage: str, said: str, tmp_path: Path,
+                                                                capsys) -> None:
+    """Scans stamped backwards, all at one stamp, or with a nanosec field past a second are placed by a wrong
+    time: grid skips and counts them as ndt-odom and slam do (precision fell to 0.36-0.60 silently)."""
+    t0 = 1_700_000_000_000_000_000
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", t0 + i * 100_000_000,
+             make_tf(t0 + i * 100_000_000, "map", "base_scan", (0.01 * i, 0, 0), (0, 0, 0, 1))) for i in range(40)]
+    ranges = np.full(360, 2.0, dtype=np.float32)
+    scans = [make_scan(t0 + i * 200_000_000, ranges) for i in range(1, 19)]
+    if damage == "backwards":
+        scans[5].header.stamp.sec, scans[6].header.stamp.sec = scans[6].header.stamp.sec, scans[5].header.stamp.sec
+        scans[5].header.stamp.nanosec, scans[6].header.stamp.nanosec = (scans[6].header.stamp.nanosec,
+                                                                        scans[5].header.stamp.nanosec)
+    elif damage == "one stamp":
+        for scan in scans[1:]:
+            scan.header.stamp.sec, scan.header.stamp.nanosec = scans[0].header.stamp.sec, scans[0].header.stamp.nanosec
+    else:
+        scans[5].header.stamp.nanosec = 1_500_000_000
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", t0 + (i + 1) * 200_000_000 + 1, scan) for i, scan in enumerate(scans)]
+    bag = write_bag(tmp_path / damage.replace(" ", "_"), sorted(msgs, key=lambda m: m[2]))
+    code, out, err = run(["grid", str(bag), "--out", str(tmp_path / "out"), "--no-mcap"], capsys)
+    assert code == 0, err
+    assert said in err, err
