@@ -35,6 +35,10 @@ import numpy as np
 
 from bagtools.grid.raytrace import EPS_CELLS, traverse
 
+#: Cells traversed at once by :meth:`OccupancyGrid.insert_ray` (a few hundred MB of traversal): a scan whose rays
+#: cross more (a 20-million-beam scan) is inserted in parts, each part's cells updated once.
+RAY_CELLS_PER_PART = 2_000_000
+
 GROW_STEP_CELLS = 32
 """When the grid grows, each side grows by a multiple of this many cells."""
 
@@ -344,7 +348,12 @@ class OccupancyGrid:
         ends = np.empty((r.size, 2))
         ends[:, 0] = pose[0] + r * np.cos(world_angles)
         ends[:, 1] = pose[1] + r * np.sin(world_angles)
-        self._insert(pose[:2], ends, hit, l_free, l_occ)
+        # A scan of millions of beams is traversed in parts of RAY_CELLS_PER_PART cells, not all at once.
+        crossed = np.cumsum(r * self.resolution + 2.0)
+        cuts = np.searchsorted(crossed, np.arange(RAY_CELLS_PER_PART, crossed[-1], RAY_CELLS_PER_PART))
+        for part in np.split(np.arange(r.size), np.unique(cuts)):
+            if part.size:
+                self._insert(pose[:2], ends[part], hit[part], l_free, l_occ)
 
     def insert_segments(
         self, start_xy: np.ndarray, end_xy: np.ndarray, inverse_model: tuple[float, float] = DEFAULT_INVERSE_MODEL,

@@ -42,9 +42,13 @@ from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
 from bagtools.io import LASERSCAN_TYPES, BagReader, LaserScanArrays, open_bag, read_tf_arrays
 from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
+from bagtools.limits import check_memory
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import guess_base_frame, repair_dynamic_tf
+
+#: Memory a grid cell costs while a map is built and written (log-odds, the PGM, the PNG and its RGBA copies).
+GRID_BYTES_PER_CELL = 40
 from bagtools.trajectory import Trajectory, read_tum, read_tum_frames
 from bagtools.transforms import pose2tform
 
@@ -234,6 +238,8 @@ class GridMapPipeline:
             hi = np.maximum(hi, [self.grid.x_world_limits[1], self.grid.y_world_limits[1]])
         lo_cells, hi_cells = np.floor(lo * res), np.ceil(hi * res)
         cols, rows = (hi_cells - lo_cells).astype(float)
+        check_memory(cols * rows * GRID_BYTES_PER_CELL, f"a grid of {cols:.0f} x {rows:.0f} cells at {res:g} cells/m",
+                     "use coarser cells (--resolution)")
         if cols * rows > self.options.max_cells:
             width, height = (hi - lo)
             raise BagtoolsError(

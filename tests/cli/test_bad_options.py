@@ -59,3 +59,42 @@ def test_memory_budget_from_environment(monkeypatch) -> None:
     assert memory_budget_bytes() == 500 << 20
     monkeypatch.delenv("BAGTOOLS_MEMORY_BUDGET")
     assert memory_budget_bytes() >= 1 << 30
+
+
+@pytest.mark.parametrize("argv", [
+    ["grid", BAG, "--out", "{out}", "--resolution", "1000"],
+    ["slam", BAG, "--out", "{out}", "--resolution", "0.001"],
+])
+def test_a_grid_past_the_memory_budget_is_refused(argv: list[str], tmp_path: Path, capsys, monkeypatch) -> None:
+    """1 mm cells over the TurtleBot3 world: 90 M cells, 3.6 GB; both ran to 2.5 GB under a 100 MB budget."""
+    monkeypatch.setenv("BAGTOOLS_MEMORY_BUDGET", "100M")
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_info:
+        main([a.replace("{out}", str(out)) for a in argv])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and err.count("\n") == 1, err
+    assert "cells at 1000 cells/m would need 3.6 GB of memory, over the budget of 104.9 MB" in err
+    assert not out.exists()
+
+
+def test_a_scan_of_millions_of_beams_is_inserted_in_parts() -> None:
+    """One scan of 2 million beams crosses some 80 million cells: traversed in parts, its peak stays a few hundred
+    MB (a 20-million-beam scan reached 6 GB under a 1 GB budget), and a part's cells are as one insertion's."""
+    import tracemalloc
+
+    import numpy as np
+
+    from bagtools.grid import OccupancyGrid
+    from bagtools.grid.occupancy import RAY_CELLS_PER_PART
+
+    grid = OccupancyGrid(10.0, 10.0, 20.0, np.array([-5.0, -5.0]))
+    n = 2_000_000
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    tracemalloc.start()
+    grid.insert_ray(np.zeros(3), np.full(n, 2.0), angles, 3.5)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert n * 2.0 * 20.0 > 10 * RAY_CELLS_PER_PART and peak < 1.0e9
+    small = OccupancyGrid(10.0, 10.0, 20.0, np.array([-5.0, -5.0]))
+    small.insert_ray(np.zeros(3), np.full(3600, 2.0), np.linspace(-np.pi, np.pi, 3600, endpoint=False), 3.5)
+    assert np.array_equal(grid.occupancy_matrix() > 0.5, small.occupancy_matrix() > 0.5)
