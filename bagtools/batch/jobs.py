@@ -141,6 +141,10 @@ def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Jo
 
 def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.gridmap import GridMapOptions
+    from bagtools.trajectory import read_tum
+
+    if p["poses"] not in ("tf", "ground-truth"):
+        read_tum(p["poses"])  # a missing or bad trajectory file is one error before any work, not one per bag
 
     return WriterConfig(GridMapOptions(topic=p["topic"], frame=p["frame"] or GridMapOptions.default_frame(p["poses"]),
                                        poses=p["poses"], resolution=p["resolution"], max_range_m=p["max_range"],
@@ -188,6 +192,10 @@ def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Job
 
 def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.slam import SlamOptions
+    from bagtools.trajectory import read_relations
+
+    if p["relations"]:
+        read_relations(p["relations"])  # a missing or bad relations file is one error before any work
 
     return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=p["resolution"],
                                     max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],

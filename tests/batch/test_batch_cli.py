@@ -56,6 +56,8 @@ def test_help_has_an_example(capsys) -> None:
     (["grid", "{bag}", "--workers", "0"], "invalid value for '--workers'"),
     (["grid", "{bag}", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the embedded cluster"),
     (["grid", "{bag}", "--scheduler", ""], "--scheduler is empty"),
+    (["grid", "{bag}", "--", "--poses", "/missing.tum"], "/missing.tum: no such trajectory file"),
+    (["slam", "{bag}", "--", "--relations", "/missing.relations"], "/missing.relations: cannot read the relations"),
     (["grid", "{bag}", "--scheduler", "  "], "--scheduler is empty"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2_before_any_work(args: list[str], problem: str, fleet: Fleet,
