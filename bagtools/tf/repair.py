@@ -92,6 +92,8 @@ class EdgeFindings:
     interleaved: str = ""  # a description of two interleaved publishers, and which one is kept
     corrupt: int = 0  # leaps faster than anything moves (1e30 m values)
     glitches: int = 0  # short runs far from the samples around them, which agree
+    jumps: int = 0  # steps faster than anything moves that do not come back (said, not repaired)
+    largest_jump_m: float = 0.0
     drop: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
@@ -119,6 +121,9 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
       the two streams are told apart and the one that moves over the larger
       extent is kept.
     - Corrupt leaps (:func:`_leaps`: 1e30 m values) are dropped.
+    - A step faster than SPIKE_SPEED_MPS that does not come back (the whole
+      frame moved: an odometry reset, a localizer's jump, damage) is counted as
+      a jump and said; it is not repaired, as nothing tells which side is right.
     - A glitch is a short run of samples (up to 3) far from the running median
       (more than GLITCH_MIN_M / GLITCH_MIN_RAD, and GLITCH_STEP_FACTOR times the
       edge's typical nonzero step) while the samples on either side of the run
@@ -153,6 +158,12 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
         glitch = _glitches(translation[rows], _sign_aligned(_unit(rotation_xyzw[rows])))
         found.glitches = int(glitch.size)
         rows = np.delete(rows, glitch)
+    if rows.size >= 2:
+        step_m = np.linalg.norm(np.diff(translation[rows], axis=0), axis=1)
+        dt_s = np.diff(stamps_ns[rows]) / 1e9
+        jump = step_m > SPIKE_SPEED_MPS * dt_s + SPIKE_MIN_M
+        found.jumps = int(jump.sum())
+        found.largest_jump_m = float(step_m[jump].max()) if found.jumps else 0.0
     found.drop = np.setdiff1d(np.arange(n), rows)
     return found
 
@@ -310,6 +321,10 @@ def describe_findings(parent: str, child: str, found: EdgeFindings, repaired: bo
     if found.glitches:
         out.append(f"{edge}: {'dropped ' if repaired else ''}{found.glitches} isolated glitch(es) (samples far from "
                    "those around them, which agree: a zeroed coordinate or a flipped yaw)")
+    if found.jumps:
+        out.append(f"{edge}: jumps {found.jumps} time(s), up to {found.largest_jump_m:.3g} m at once, faster than "
+                   f"{SPIKE_SPEED_MPS:g} m/s, and stays there (a reset, or damage): whatever is placed through "
+                   "this edge after a jump is that far off")
     return out
 
 
