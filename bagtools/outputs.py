@@ -417,6 +417,8 @@ class OutputDir:
             raise BagtoolsError(f"cannot write: {_os_problem(err)}", self.out_dir) from err
         finally:
             self._close(published)
+        if isinstance(exc, OSError):  # writing a staged file failed (a full disk): name the output, not the input
+            raise BagtoolsError(f"cannot write: {_os_problem(exc)}", self.out_dir) from exc
 
     def _close(self, published: bool) -> None:
         """Remove the staging directory and, unless results were published, the directories this run created."""

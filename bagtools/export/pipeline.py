@@ -66,8 +66,13 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
                     sink.write(chunk)
                     summary.messages += 1
                     summary.rows += len(chunk["stamp_ns"])
-            finally:
-                sink.close()
+            except BaseException:
+                try:  # the first failure is what happened (a full disk); closing after it only fails again
+                    sink.close()
+                except Exception:
+                    pass
+                raise
+            sink.close()
             if summary.messages == 0:
                 raise BagtoolsError(f"no message on {topic} could be read, so there is nothing to export", bag.path)
         summary.warnings = list(bag.warnings) + [

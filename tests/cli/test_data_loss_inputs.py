@@ -218,3 +218,30 @@ def test_a_dangling_symlink_is_an_existing_output(argv: list[str], tmp_path: Pat
     code, _, err = run([a.replace("{out}", str(link)) for a in argv] + ["--force"], capsys)
     assert code == 0, err
     assert link.is_file() and not link.is_symlink() and not (tmp_path / "elsewhere").exists()
+
+
+def test_a_full_disk_is_said_and_names_the_output(tmp_path: Path, capsys, monkeypatch) -> None:
+    """ENOSPC while writing: Parquet's 'Operation on closed file' from the close after it hid it, and an output
+    directory's failure named the input bag. Both now say 'No space left on device' of the output."""
+    import errno
+
+    from bagtools.export import sinks
+    from bagtools.gridmap import writer as grid_writer
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def closed(self):
+        raise ValueError("Operation on closed file")  # what pyarrow's writer says after the failed write
+
+    monkeypatch.setattr(sinks.ParquetSink, "write", full)
+    monkeypatch.setattr(sinks.ParquetSink, "close", closed)
+    out = tmp_path / "odom.parquet"
+    code, _, err = run(["export", str(BAG), "/odom", "--out", str(out)], capsys)
+    assert code == 2 and err == f"bagtools: {out}: cannot write: No space left on device\n", err
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(grid_writer, "render_map_png", full)  # the PNG is written into the staged directory
+    grid_out = tmp_path / "grid"
+    code, _, err = run(["grid", str(BAG), "--out", str(grid_out), "--no-mcap"], capsys)
+    assert code == 2 and err.endswith(f"bagtools: {grid_out}: cannot write: No space left on device\n"), err
+    assert not grid_out.exists()
