@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bagtools.errors import BagtoolsError, TopicError
-from bagtools.export.sinks import FORMATS, open_sink
+from bagtools.export.sinks import FORMATS, close_quietly, open_sink
 from bagtools.export.tables import ROWS
 from bagtools.io import open_bag
 from bagtools.outputs import atomic_path, check_writable
@@ -67,10 +67,7 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
                     summary.messages += 1
                     summary.rows += len(chunk["stamp_ns"])
             except BaseException:
-                try:  # the first failure is what happened (a full disk); closing after it only fails again
-                    sink.close()
-                except Exception:
-                    pass
+                close_quietly(sink)  # the first failure is what happened (a full disk); closing only fails again
                 raise
             sink.close()
             if summary.messages == 0:

@@ -242,8 +242,18 @@ class Batched:
     def close(self) -> None:
         try:
             self._flush()
-        finally:
-            self.sink.close()
+        except BaseException:
+            close_quietly(self.sink)  # the flush's failure (a full disk) is what happened, not the close's after it
+            raise
+        self.sink.close()
+
+
+def close_quietly(sink: Sink | Batched) -> None:
+    """Close ``sink`` after a failure, ignoring what closing a half-written file says about itself."""
+    try:
+        sink.close()
+    except Exception:
+        pass
 
 
 def open_sink(path: Path, fmt: str) -> Batched:
