@@ -17,7 +17,7 @@ from bagtools.io import ODOMETRY_TYPES, BagReader, decode_odometry
 from bagtools.transforms import quat2tform, xyzw2quat
 
 if TYPE_CHECKING:
-    from simulate.world import World
+    from bagtools_simulate.world import World
 
 SIM_WORLD_TOPIC = "/simulation/world"
 GROUND_TRUTH_TOPIC = "/ground_truth"
@@ -41,7 +41,7 @@ def load_sim_world(bag: BagReader) -> World | None:
     info = read_sim_info(bag)
     if info is None or "world" not in info:
         return None
-    from simulate.world import World
+    from bagtools_simulate.world import World
 
     return World.from_dict(info["world"], path=bag.path)
 

@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 from bench.common import Row
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 REPO = Path(__file__).resolve().parents[1]
 

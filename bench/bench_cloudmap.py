@@ -10,7 +10,7 @@ from pathlib import Path
 from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, write_cloud_map
 from bagtools.io import decode_pointcloud2, open_bag
 from bench.common import Row, best_time_s
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 TOPIC = "/camera/depth/points"
 

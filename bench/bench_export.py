@@ -10,7 +10,7 @@ from bagtools.export import export_topic
 from bagtools.export.tables import DECODERS
 from bagtools.io import open_bag
 from bench.common import Row, best_time_s
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 
 def _read_decode(bag: Path, topic: str) -> int:

@@ -11,7 +11,7 @@ from pathlib import Path
 from bagtools.gridmap import GridMapOptions, GridMapPipeline, write_grid_map
 from bagtools.io import decode_laserscan, open_bag
 from bench.common import Row, best_time_s
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 TOPIC = "/scan"
 

@@ -28,7 +28,7 @@ from bagtools.io import decode_laserscan, open_bag
 from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 from bagtools.trajectory import rpe_frames
 from bench.common import Row, best_time_s
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 
 def _read_decode(bag: Path) -> int:

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-import simulate.pipeline as pipeline
+import bagtools_simulate.pipeline as pipeline
 from bench.common import Row, best_time_s
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 
 class _ConstantLidar:

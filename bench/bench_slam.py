@@ -30,7 +30,7 @@ from bagtools.slam import SlamOptions, SlamPipeline, SlamResult, laser_odometry,
 from bagtools.transforms import se2_between, tform2pose, wrap_to_pi
 from bench.bench_ndt import point_to_plane_icp
 from bench.common import Row
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 REAL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 

@@ -106,9 +106,9 @@ def loop_duration_s(seed: int, max_linear_mps: float, max_angular_radps: float) 
     Asks the simulator's planner (the same controller ``bagtools simulate`` runs)
     how long one loop takes, so every run of the experiment maps the same walls.
     """
-    from simulate.pipeline import ODOM_RATE_HZ, SimConfig, plan_trajectory
-    from simulate.robot.routes import make_route
-    from simulate.world import load_world
+    from bagtools_simulate.pipeline import ODOM_RATE_HZ, SimConfig, plan_trajectory
+    from bagtools_simulate.robot.routes import make_route
+    from bagtools_simulate.world import load_world
 
     world = load_world("turtlebot3_world")
     loop = make_route(SPEED_ROUTE, world, seed).loop_xy

@@ -18,11 +18,11 @@ from bagtools.errors import BagtoolsError
 from bagtools.outputs import atomic_path, check_writable, mark_own_output
 from bagtools.progress import progress_bar
 from bagtools.transforms import pose2tform, se2_compose
-from simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, amcl_map_to_odom
-from simulate.robot.controller import Limits, Motion, drive
-from simulate.robot.odometry import ODOM_NOISE_LEVELS, Odometry, wheel_odometry
-from simulate.robot.routes import ROUTE_NAMES, make_route
-from simulate.robot.waffle import (
+from bagtools_simulate.robot.amcl import TRANSFORM_TOLERANCE_NS, amcl_map_to_odom
+from bagtools_simulate.robot.controller import Limits, Motion, drive
+from bagtools_simulate.robot.odometry import ODOM_NOISE_LEVELS, Odometry, wheel_odometry
+from bagtools_simulate.robot.routes import ROUTE_NAMES, make_route
+from bagtools_simulate.robot.waffle import (
     MAX_ANGULAR_RADPS,
     MAX_LINEAR_MPS,
     ROBOT_RADIUS_M,
@@ -33,9 +33,9 @@ from simulate.robot.waffle import (
     urdf_text,
     wheel_quats_xyzw,
 )
-from simulate.sensors import DepthCamera, Imu, Lidar
-from simulate.world import World, load_world
-from simulate.writer import DEFAULT_ROS_DISTRO, ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
+from bagtools_simulate.sensors import DepthCamera, Imu, Lidar
+from bagtools_simulate.world import World, load_world
+from bagtools_simulate.writer import DEFAULT_ROS_DISTRO, ROS_DISTROS, MessageBuilder, SimBagWriter, is_rosbag2_output
 
 ODOM_RATE_HZ = 30
 STEPS_PER_SCAN = 6  # 5 Hz scans at the 30 Hz odometry rate

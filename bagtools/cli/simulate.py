@@ -40,7 +40,7 @@ def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, 
       bagtools simulate out/sim --duration 120 --route figure8 --odom-noise high
       bagtools simulate out/sim_jazzy --ros-distro jazzy --no-cloud --force
     """
-    from simulate.pipeline import SimConfig, parse_cloud_size, simulate_bag
+    from bagtools_simulate.pipeline import SimConfig, parse_cloud_size, simulate_bag
 
     config = SimConfig(duration_s=duration, seed=seed, route=route, odom_noise=odom_noise, max_linear_mps=max_linear,
                        max_angular_radps=max_angular, cloud=not no_cloud, cloud_rate_hz=cloud_rate,

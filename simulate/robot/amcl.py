@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simulate.robot.kinematics import wrap_angle
+from bagtools_simulate.robot.kinematics import wrap_angle
 from bagtools.transforms import se2_compose, se2_inverse
 
 UPDATE_MIN_D_M = 0.2

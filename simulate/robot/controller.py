@@ -1,7 +1,7 @@
 """A regulated pure-pursuit controller with acceleration limits, driving the robot along a route.
 
 The controller runs at the odometry rate; within each step the commanded (v, w) is constant,
-so the true motion is integrated exactly (:mod:`simulate.robot.kinematics`).
+so the true motion is integrated exactly (:mod:`bagtools_simulate.robot.kinematics`).
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from simulate.robot.kinematics import integrate_increments, wrap_angle
-from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS
+from bagtools_simulate.robot.kinematics import integrate_increments, wrap_angle
+from bagtools_simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS
 
 LOOKAHEAD_M = 0.3
 ROTATE_TO_HEADING_RAD = 0.785  # nav2 RPP rotate_to_heading_min_angle

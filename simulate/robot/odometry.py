@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from simulate.robot.controller import Motion
-from simulate.robot.kinematics import integrate_increments
-from simulate.robot.waffle import ENCODER_TICKS_PER_REV, WHEEL_RADIUS_M, WHEEL_SEPARATION_M
+from bagtools_simulate.robot.controller import Motion
+from bagtools_simulate.robot.kinematics import integrate_increments
+from bagtools_simulate.robot.waffle import ENCODER_TICKS_PER_REV, WHEEL_RADIUS_M, WHEEL_SEPARATION_M
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from simulate.robot.waffle import ROBOT_RADIUS_M
+from bagtools_simulate.robot.waffle import ROBOT_RADIUS_M
 
 ROUTE_NAMES = ("lap", "figure8", "random")
 PATH_SPACING_M = 0.02

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simulate.world import World
+from bagtools_simulate.world import World
 
 
 @dataclass(frozen=True)

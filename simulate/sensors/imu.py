@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simulate.robot.controller import Motion
+from bagtools_simulate.robot.controller import Motion
 
 GRAVITY_MPS2 = 9.8  # Gazebo's default world gravity, as in the TurtleBot3 worlds
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simulate.world import World
+from bagtools_simulate.world import World
 
 
 @dataclass(frozen=True)

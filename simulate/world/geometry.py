@@ -1,4 +1,4 @@
-"""Vectorized 2D/3D geometry kernels used by :mod:`simulate.world`.
+"""Vectorized 2D/3D geometry kernels used by :mod:`bagtools_simulate.world`.
 
 Every function works on whole arrays: rays x faces, points x edges, as numpy
 broadcasts. Callers chunk the ray/point axis so temporaries stay small.

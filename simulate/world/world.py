@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from simulate.world import geometry as geo
+from bagtools_simulate.world import geometry as geo
 
 #: Rays per bearing group in ray casts: fewer groups mean less Python overhead,
 #: more groups mean fewer faces per ray.

@@ -1,6 +1,6 @@
 """A rosbag2 writer for the simulator: one zstd-chunked MCAP file with CRCs, and metadata.yaml per distro.
 
-Every ``--ros-distro`` gives a bag its own rosbag2 reads (see :mod:`simulate.writer.metadata`):
+Every ``--ros-distro`` gives a bag its own rosbag2 reads (see :mod:`bagtools_simulate.writer.metadata`):
 
 - ``humble`` (the default): metadata version 5, which Humble *and* Jazzy read (Jazzy reads
   every version from 4 on). Channel QoS strings use Humble's numbered policies.
@@ -29,8 +29,8 @@ from rosbags.typesys.store import Typestore
 
 from bagtools.errors import BagtoolsError
 from bagtools.outputs import is_own_output
-from simulate.writer.mcap_file import McapFileWriter
-from simulate.writer.metadata import BagInfo, OfferedQos, TopicInfo, metadata_yaml, qos_string, serialized_metadata
+from bagtools_simulate.writer.mcap_file import McapFileWriter
+from bagtools_simulate.writer.metadata import BagInfo, OfferedQos, TopicInfo, metadata_yaml, qos_string, serialized_metadata
 
 ROS_DISTROS = {"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}
 DEFAULT_ROS_DISTRO = "humble"

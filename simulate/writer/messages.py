@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from rosbags.typesys.store import Typestore
 
-from simulate.writer.layout import FixedLayout
+from bagtools_simulate.writer.layout import FixedLayout
 
 # Pose/twist covariance diagonals (x, y, z, roll, pitch, yaw): planar odometry leaves z,
 # roll and pitch unobserved, as turtlebot3_node and Gazebo's diff drive plugin do.
@@ -175,7 +175,7 @@ class MessageBuilder:
         )
         return self._serialize(msg)
 
-    # Batches: N messages of one fixed layout at once (see simulate.writer.layout).
+    # Batches: N messages of one fixed layout at once (see bagtools_simulate.writer.layout).
 
     def _layout(self, key: tuple, build: Any, fields: dict[str, str]) -> FixedLayout:
         if key not in self._layouts:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from tests.conftest import make_tf, write_bag
 
 T0_NS = 1_700_000_000_000_000_000

@@ -9,7 +9,7 @@ import pytest
 
 from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, PointAccumulator, random_subset
 from bagtools.errors import BagtoolsError, TopicError
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "sim_lap_cloud_20s"
 

@@ -132,13 +132,13 @@ def test_what_the_guide_says_about_the_speed_experiment_holds() -> None:
 
 def test_the_simulator_settings_the_guide_quotes_are_the_simulators(guide: str) -> None:
     from bagtools.grid.occupancy import DEFAULT_INVERSE_MODEL, OccupancyGrid
-    from simulate.pipeline import LATENCY_MS, ODOM_RATE_HZ, STEPS_PER_SCAN
-    from simulate.robot.amcl import (ESTIMATE_XY_SD_M, ESTIMATE_YAW_SD_RAD, TRANSFORM_TOLERANCE_NS, UPDATE_MIN_A_RAD,
+    from bagtools_simulate.pipeline import LATENCY_MS, ODOM_RATE_HZ, STEPS_PER_SCAN
+    from bagtools_simulate.robot.amcl import (ESTIMATE_XY_SD_M, ESTIMATE_YAW_SD_RAD, TRANSFORM_TOLERANCE_NS, UPDATE_MIN_A_RAD,
                                      UPDATE_MIN_D_M)
-    from simulate.robot.routes import make_route
-    from simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS, STATIC_TRANSFORMS
-    from simulate.sensors import Lidar
-    from simulate.world import load_world
+    from bagtools_simulate.robot.routes import make_route
+    from bagtools_simulate.robot.waffle import MAX_ANGULAR_RADPS, MAX_LINEAR_MPS, STATIC_TRANSFORMS
+    from bagtools_simulate.sensors import Lidar
+    from bagtools_simulate.world import load_world
 
     prose = " ".join(guide.split())
 

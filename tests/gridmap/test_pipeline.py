@@ -25,7 +25,7 @@ X0, Y0 = 1.013, 2.017
 @pytest.fixture(scope="module")
 def lap_bag(tmp_path_factory) -> Path:
     """40 s lap of the TurtleBot3 world with realistic odometry noise, no depth camera (~0.3 s to simulate)."""
-    from simulate.pipeline import SimConfig, simulate_bag
+    from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
     out = tmp_path_factory.mktemp("grid") / "lap40"
     return simulate_bag(out, SimConfig(duration_s=40.0, seed=3, route="lap", odom_noise="realistic", cloud=False)).path

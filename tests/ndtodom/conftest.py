@@ -10,8 +10,8 @@ import pytest
 from bagtools.io import open_bag
 from bagtools.simtruth import read_ground_truth
 from bagtools.transforms import quat2xyzw, tform2pose, tform2quat
-from simulate.sensors.lidar import Lidar
-from simulate.world import load_world
+from bagtools_simulate.sensors.lidar import Lidar
+from bagtools_simulate.world import load_world
 from tests.conftest import FIXTURES, TYPESTORE, _header, make_scan, make_tf, write_bag
 
 T0_NS = 1_700_000_000_000_000_000

@@ -14,8 +14,8 @@ from bagtools.errors import BagtoolsError
 from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform
-from simulate.pipeline import SimConfig, simulate_bag
-from simulate.sensors.lidar import Lidar
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.sensors.lidar import Lidar
 from tests.conftest import FIXTURES
 from tests.ndtodom.conftest import T0_NS, make_odometry, make_scan, make_tf, scan_bag, write_bag
 
@@ -210,7 +210,7 @@ def test_without_odometry_the_trajectory_is_the_base_where_tf_static_mounts_the_
                                                                                        lap_truth) -> None:
     """No odom -> base transform, but /tf_static base_link -> base_scan: the poses are base_link's, not the laser's."""
     from bagtools.transforms import se2_between, tform2pose
-    from simulate.world import load_world
+    from bagtools_simulate.world import load_world
 
     stamps, T_map_base = lap_truth
     mount = np.array([0.3, 0.1, 0.4])  # x, y, yaw of the laser on the base: far enough off to show

@@ -13,8 +13,8 @@ from rosbags.typesys import Stores, get_typestore
 from bagtools.dataset import recording_order, stamped_late
 from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline
 from bagtools.transforms import se2_between, tform2pose
-from simulate.sensors.lidar import Lidar
-from simulate.world import load_world
+from bagtools_simulate.sensors.lidar import Lidar
+from bagtools_simulate.world import load_world
 
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
 

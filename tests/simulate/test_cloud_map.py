@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 BEFORE = {
     # 30 s lap, default settings, map frame (AMCL-like map -> odom errors dominate)

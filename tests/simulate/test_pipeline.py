@@ -11,12 +11,12 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
 from scipy.spatial.transform import Rotation
 
-import simulate.pipeline as pipeline
+import bagtools_simulate.pipeline as pipeline
 from bagtools.errors import BagtoolsError, OutputExistsError
-from simulate.pipeline import SimConfig, parse_cloud_size, simulate_bag
-from simulate.robot.waffle import JOINTS, STATIC_TRANSFORMS, WHEEL_RADIUS_M, WHEEL_SEPARATION_M, T_base_footprint_frame
-from simulate.sensors import DepthCamera
-from simulate.world import load_world
+from bagtools_simulate.pipeline import SimConfig, parse_cloud_size, simulate_bag
+from bagtools_simulate.robot.waffle import JOINTS, STATIC_TRANSFORMS, WHEEL_RADIUS_M, WHEEL_SEPARATION_M, T_base_footprint_frame
+from bagtools_simulate.sensors import DepthCamera
+from bagtools_simulate.world import load_world
 
 SHORT = SimConfig(duration_s=21.0, cloud_size=(40, 30), cloud_rate_hz=2.0)
 

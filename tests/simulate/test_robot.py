@@ -7,10 +7,10 @@ import pytest
 
 from bagtools.errors import BagtoolsError
 from bagtools.transforms import se2_compose, se2_inverse
-from simulate.robot import ROUTE_NAMES, Limits, amcl_map_to_odom, drive, make_route, wheel_odometry
-from simulate.robot.amcl import UPDATE_MIN_A_RAD, UPDATE_MIN_D_M
-from simulate.robot.kinematics import integrate_increments, wrap_angle
-from simulate.robot.waffle import (
+from bagtools_simulate.robot import ROUTE_NAMES, Limits, amcl_map_to_odom, drive, make_route, wheel_odometry
+from bagtools_simulate.robot.amcl import UPDATE_MIN_A_RAD, UPDATE_MIN_D_M
+from bagtools_simulate.robot.kinematics import integrate_increments, wrap_angle
+from bagtools_simulate.robot.waffle import (
     JOINTS,
     MAX_ANGULAR_RADPS,
     MAX_LINEAR_MPS,
@@ -20,7 +20,7 @@ from simulate.robot.waffle import (
     T_base_footprint_frame,
     urdf_text,
 )
-from simulate.world import load_world
+from bagtools_simulate.world import load_world
 
 DT = 1.0 / 30.0
 

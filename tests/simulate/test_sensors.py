@@ -1,4 +1,4 @@
-"""Tests for simulate.sensors: the LDS-01 lidar and the depth camera."""
+"""Tests for bagtools_simulate.sensors: the LDS-01 lidar and the depth camera."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from simulate.sensors import DepthCamera, Lidar
-from simulate.world import World, load_world
+from bagtools_simulate.sensors import DepthCamera, Lidar
+from bagtools_simulate.world import World, load_world
 
 SCAN_Z = 0.131
 CAMERA_Z = 0.117  # camera_rgb_frame above the floor on the Waffle
@@ -219,8 +219,8 @@ def test_camera_rejects_bad_parameters(tb3: World) -> None:
 
 
 def test_imu_noise_statistics_are_turtlebot3_gazebo_s():
-    from simulate.robot.controller import Motion
-    from simulate.sensors import Imu
+    from bagtools_simulate.robot.controller import Motion
+    from bagtools_simulate.sensors import Imu
 
     # a standing robot for 100 s: readings are gravity and noise only
     n = 3000
@@ -239,9 +239,9 @@ def test_imu_noise_statistics_are_turtlebot3_gazebo_s():
 
 
 def test_imu_measures_the_turn_rate_centripetal_and_forward_acceleration():
-    from simulate.robot.controller import Motion
-    from simulate.robot.kinematics import integrate_increments
-    from simulate.sensors import Imu
+    from bagtools_simulate.robot.controller import Motion
+    from bagtools_simulate.robot.kinematics import integrate_increments
+    from bagtools_simulate.sensors import Imu
 
     dt, n = 1 / 30, 300
     v = np.minimum(np.arange(n) * 0.01, 0.2)  # accelerate at 0.3 m/s^2, then cruise

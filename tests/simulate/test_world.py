@@ -1,4 +1,4 @@
-"""Tests for simulate.world: loading, ray casts, clearance and surface distances."""
+"""Tests for bagtools_simulate.world: loading, ray casts, clearance and surface distances."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from bagtools.errors import BagtoolsError
-from simulate.world import World, load_world, packaged_world_names
-from simulate.world import world as world_module
+from bagtools_simulate.world import World, load_world, packaged_world_names
+from bagtools_simulate.world import world as world_module
 
 SCAN_Z = 0.131  # base_scan height above the floor on the Waffle
 

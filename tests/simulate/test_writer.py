@@ -16,9 +16,9 @@ from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
 from bagtools.io import open_bag
-from simulate.pipeline import SimConfig, simulate_bag
-from simulate.writer import TOPICS, MessageBuilder, typestore_for
-from simulate.writer.layout import FixedLayout
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.writer import TOPICS, MessageBuilder, typestore_for
+from bagtools_simulate.writer.layout import FixedLayout
 
 # RIHS01 hashes (REP 2011) as Jazzy publishes them, from outside rosbags: `ros2 topic info -v`
 # output and type tables generated with ROS installations (std_msgs/String is also the hash in

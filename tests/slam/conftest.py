@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from simulate.pipeline import SimConfig, simulate_bag
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from tests.conftest import REAL_DIR
 from tests.slam.standin import Drift, front_end_from_truth
 

@@ -22,7 +22,7 @@ from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
 from tests.ndtodom.conftest import scan_bag
-from simulate.sensors.lidar import Lidar
+from bagtools_simulate.sensors.lidar import Lidar
 from tests.slam.conftest import CSAIL_DRIFT
 from tests.slam.standin import as_front_end_result, front_end_from_truth, true_poses_at_scans
 
