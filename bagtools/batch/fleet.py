@@ -20,6 +20,7 @@ import numpy as np
 from bagtools.batch.jobs import Job
 from bagtools.batch.plan import row_columns
 from bagtools.batch.task import FAILED, OK, SKIPPED
+from bagtools.figures import tidy_layout
 from bagtools.outputs import OutputDir
 
 FLEET_FILES = ["fleet.csv", "fleet.parquet", "fleet.png"]
@@ -109,7 +110,7 @@ def render_fleet_png(path: Path, rows: list[dict], job: Job, title: str) -> None
     else:
         last.set_xlabel(f"{n} bags, in the order of fleet.csv")
     axes[0].set_title(title)
-    fig.tight_layout()
+    tidy_layout(fig)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bagtools.figures import tidy_layout
+
 
 #: The views' rasters have at most this many cells a side (a figure is some 900 pixels wide): a large map gets
 #: coarser cells, never a raster sized by its extent (7 GiB for 600 m at 2 cm, terabytes for a damaged cloud).
@@ -75,6 +77,6 @@ def render_map_png(path: Path, points: np.ndarray, frame: str, trajectory_xyz: n
     if trajectory_xyz is not None and len(trajectory_xyz):
         top.plot(trajectory_xyz[:, 0], trajectory_xyz[:, 1], color="red", linewidth=1.0, label="sensor path")
         top.legend(loc="upper right")
-    fig.tight_layout()
+    tidy_layout(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.errors import BagtoolsError
+from bagtools.figures import tidy_layout
 from bagtools.grid.occupancy import OccupancyGrid
 from bagtools.outputs import OutputDir, atomic_path
 
@@ -309,7 +310,7 @@ def render_map_png(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title if title is not None else f"occupancy grid, {grid.cell_size_m:g} m/cell")
-    fig.tight_layout()
+    tidy_layout(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bagtools.figures import tidy_layout
 from bagtools.trajectory import Trajectory
 
 #: Side of the pixels of the scan map, metres.
@@ -42,7 +43,7 @@ def render_trajectories_png(path: Path, frame: str, ndt: Trajectory, odometry: T
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best")
-    fig.tight_layout()
+    tidy_layout(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -83,6 +84,6 @@ def render_scan_map_png(path: Path, frame: str, scan_points: list[np.ndarray], s
     ax.set_aspect("equal")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper right")
-    fig.tight_layout()
+    tidy_layout(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.errors import BagtoolsError
+from bagtools.figures import tidy_layout
 from bagtools.outputs import OutputDir, check_outputs
 from bagtools.tf.buffer import TfBuffer, format_stamp
 from bagtools.tf.exceptions import ExtrapolationException
@@ -161,7 +162,7 @@ def plot_track(track: PointTrack, path: Path) -> None:
         time_ax.grid(True, alpha=0.3)
     axes[0][0].legend(fontsize=7, loc="best")
     axes[1][0].legend(fontsize=7, loc="best")
-    fig.tight_layout()
+    tidy_layout(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
