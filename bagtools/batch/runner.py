@@ -42,6 +42,8 @@ from bagtools.batch.worker import sigint_ignored
 from bagtools.errors import BagtoolsError
 from bagtools.progress import progress_bar
 
+#: How long a scheduler may take to send its handshake after a connection, seconds.
+SCHEDULER_HANDSHAKE_S = 10.0
 #: Times a task is resubmitted after a Dask failure that is not the bag's (the bag's own errors are rows).
 TASK_RETRIES = 2
 
@@ -64,6 +66,31 @@ class ClusterSpec:
             return len(os.sched_getaffinity(0))
         except AttributeError:  # not Linux
             return os.cpu_count() or 1
+
+
+def check_speaks_dask(address: str, wait_s: float | None = None) -> None:
+    """Raise :class:`BagtoolsError` unless a ``tcp://`` ``address`` answers as a Dask scheduler does: its
+    handshake arrives as soon as one connects. Something else listening there (silent) made the Client wait for
+    ever, whatever its timeout. Other schemes (tls://, inproc://) are left to Dask."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if not address.startswith("tcp://"):
+        return
+    wait_s = SCHEDULER_HANDSHAKE_S if wait_s is None else wait_s
+    parts = urlsplit(address)
+    try:
+        with socket.create_connection((parts.hostname, parts.port or 8786), timeout=wait_s) as sock:
+            sock.settimeout(wait_s)
+            first = sock.recv(1)
+    except TimeoutError as err:
+        raise BagtoolsError(f"something listens there but says nothing within {wait_s:g} s, as no Dask scheduler "
+                            "does: is this the scheduler's address (dask scheduler prints it)?", address) from err
+    except (OSError, ValueError) as err:
+        raise BagtoolsError(f"cannot reach the Dask scheduler: {one_line(str(err), 200)}", address) from err
+    if not first:
+        raise BagtoolsError("the connection was closed at once, as no Dask scheduler does: is this the "
+                            "scheduler's address?", address)
 
 
 def _bag_bytes(bag: str) -> int:
@@ -137,6 +164,7 @@ class BatchRun:
         from distributed import Client
 
         if self.cluster.scheduler:
+            check_speaks_dask(self.cluster.scheduler)
             try:
                 client = Client(self.cluster.scheduler, timeout="20s")
             except (OSError, TimeoutError, ValueError) as err:

@@ -46,3 +46,29 @@ def test_other_dask_failures_are_internal_errors_on_one_line() -> None:
 def test_the_embedded_cluster_has_one_worker_per_usable_core_unless_told() -> None:
     assert ClusterSpec().local_workers() == len(os.sched_getaffinity(0))
     assert ClusterSpec(workers=5).local_workers() == 5
+
+
+def test_a_silent_listener_is_not_taken_for_a_scheduler() -> None:
+    """Something that accepts connections and never speaks (not Dask) made the Client wait for ever, whatever its
+    timeout; a port where nothing listens is refused at once."""
+    import socket
+    import threading
+
+    import pytest
+
+    from bagtools.batch.runner import check_speaks_dask
+    from bagtools.errors import BagtoolsError
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+    held = []
+    threading.Thread(target=lambda: held.append(server.accept()), daemon=True).start()
+    try:
+        with pytest.raises(BagtoolsError, match="says nothing within 0.5 s"):
+            check_speaks_dask(f"tcp://127.0.0.1:{port}", wait_s=0.5)
+    finally:
+        server.close()
+    with pytest.raises(BagtoolsError, match="cannot reach the Dask scheduler"):
+        check_speaks_dask(f"tcp://127.0.0.1:{port}", wait_s=0.5)
