@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bagtools.errors import BagtoolsError
+
 from tests.conftest import make_cloud, write_bag
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "sim_lap_cloud_20s"
@@ -77,8 +79,9 @@ def test_failure_while_writing_leaves_nothing(tmp_path: Path, monkeypatch) -> No
         raise OSError("disk full")
 
     monkeypatch.setattr(writer, "render_map_png", broken_png)
-    with pytest.raises(OSError):
+    with pytest.raises(BagtoolsError, match="cannot write: disk full") as err:  # naming the output, not the bag
         writer.write_cloud_map(result, tmp_path / "out")
+    assert err.value.path == str(tmp_path / "out")
     assert not (tmp_path / "out").exists()  # the run created it: a failure leaves the file system as it was
 
 
