@@ -63,9 +63,12 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     s = result.summary
     loops = s["loop_closure"]
     reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())
+    uncertain = s["front_end"].get("ambiguous", 0)
     click.echo(f"{s['scans']} scans, {s['keyframes']} keyframes; {loops['candidates']} loop candidates: "
                f"{loops['accepted']} accepted, {loops['rejected']} rejected{f' ({reasons})' if reasons else ''}; "
-               f"optimized in {s['optimization']['time_s']:.2f} s; {s['timing_s']['total']:.1f} s in all")
+               f"optimized in {s['optimization']['time_s']:.2f} s; {s['timing_s']['total']:.1f} s in all"
+               + (f"; {uncertain} front-end step(s) left uncertain (another place matched almost as well)"
+                  if uncertain else ""))
     click.echo(f"wrote {', '.join(p.name for p in written)} in {out_dir}")
     for name, label in (("errors_slam", "SLAM"), ("errors_front_end", "laser odometry")):
         errors = s.get(name)

@@ -113,3 +113,21 @@ def test_a_bad_relations_file_is_refused_before_the_work(tmp_path: Path) -> None
                     "--relations", str(path))
         assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
         assert done.stderr.startswith(f"bagtools: {path}: ") and not (tmp_path / "out").exists()
+
+
+def test_uncertain_front_end_steps_are_said_on_the_summary_line(tmp_path: Path, monkeypatch) -> None:
+    """Loops rejected are counted by reason on the summary line; steps the front end left uncertain (ambiguous:
+    another place matched almost as well) are said there too, not only past a 3 % warning threshold."""
+    from bagtools.slam import SlamPipeline
+
+    run = SlamPipeline.run
+
+    def with_uncertain(self):
+        result = run(self)
+        result.summary["front_end"]["ambiguous"] = 2
+        return result
+
+    monkeypatch.setattr(SlamPipeline, "run", with_uncertain)
+    done = _run("slam", str(FIXTURES / "sim_random_nocloud_20s"), "--out", str(tmp_path / "slam"), "--no-mcap")
+    assert done.returncode == 0, done.stderr
+    assert "; 2 front-end step(s) left uncertain (another place matched almost as well)" in done.stdout
