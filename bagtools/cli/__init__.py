@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "grid": "bagtools.cli.grid:grid",
     "slam": "bagtools.cli.slam:slam",
     "export": "bagtools.cli.export:export",
+    "eval": "bagtools.cli.evaluate:evaluate",
     "batch": "bagtools.cli.batch:batch",
 }
 

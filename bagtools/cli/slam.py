@@ -46,7 +46,7 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
       bagtools slam out/sim --out out/slam
       bagtools slam csail.mcap --out slam_scans --no-odometry --max-range 30
       bagtools slam intel --out slam_intel --relations intel.relations
-      python step_error.py out/slam/trajectory.tum out/slam/ground_truth.tum --align
+      bagtools eval out/slam/trajectory.tum out/slam/ground_truth.tum --align --gap 20
     """
     from bagtools.outputs import check_outputs
     from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam

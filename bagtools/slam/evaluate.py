@@ -19,7 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from bagtools.errors import BagtoolsError
-from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, associate, rpe_translation
+from bagtools.trajectory import (
+    ErrorStats, Relations, Trajectory, ape_translation, associate, relation_errors, rpe_translation,
+)
 from bagtools.transforms import se2_between, tform2pose
 
 #: Pose gaps reported by :func:`trajectory_errors`.
@@ -58,7 +60,30 @@ def gap_errors(reference: Trajectory, estimate: Trajectory, gap: int) -> dict:
     err = se2_between(se2_between(q[:-gap], q[gap:]), se2_between(p[:-gap], p[gap:]))
     t = np.hypot(err[:, 0], err[:, 1])
     return {"gap_poses": gap, "pairs": int(len(t)), "trans_mean_m": float(t.mean()), "trans_median_m": float(np.median(t)),
-            "trans_max_m": float(t.max()), "rot_mean_deg": float(np.degrees(np.abs(err[:, 2])).mean())}
+            "trans_max_m": float(t.max()), "rot_mean_deg": float(np.degrees(np.abs(err[:, 2])).mean()),
+            "over_0_2_m": int(np.count_nonzero(t > 0.2))}
+
+
+def evaluate(estimate: Trajectory, reference: Trajectory | None, relations: Relations | None = None,
+             gap: int = 1, align: bool = False) -> dict:
+    """What ``bagtools eval`` reports of ``estimate``: against ``reference`` evo's APE (and, with ``align``, the
+    APE after the best SE(2) alignment), evo's RPE per metre and the error over ``gap`` poses; against
+    ``relations`` the metric of Kuemmerle et al. Each part that cannot be computed says why."""
+    out: dict = {"poses": len(estimate)}
+    if reference is not None:
+        parts = [("ape_translation_m", lambda: ape_translation(reference, estimate).as_dict()),
+                 ("rpe_translation_m_per_1m", lambda: rpe_translation(reference, estimate, delta_m=1.0).as_dict()),
+                 (f"relative_gap_{gap}", lambda: gap_errors(reference, estimate, gap))]
+        if align:
+            parts.insert(1, ("ape_aligned_m", lambda: ape_aligned(reference, estimate).as_dict()))
+        for name, fn in parts:
+            try:
+                out[name] = fn()
+            except BagtoolsError as err:
+                out[name] = {"unavailable": err.problem}
+    if relations is not None:
+        out["relations"] = relation_errors(relations, estimate)
+    return out
 
 
 def trajectory_errors(reference: Trajectory, estimate: Trajectory) -> dict:
