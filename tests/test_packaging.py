@@ -21,7 +21,9 @@ def test_every_package_of_the_tree_is_installed_and_the_simulator_as_bagtools_si
         found.add(".".join(init.parent.relative_to(REPO).parts))
     for init in REPO.glob("simulate/**/__init__.py"):
         found.add(".".join(("bagtools_simulate", *init.parent.relative_to(REPO / "simulate").parts)))
+    found.add("bagtools_simulate.data")  # the world files, a data-only package
     assert set(setuptools["packages"]) == found
+    assert _pyproject()["tool"]["setuptools"]["package-data"]["bagtools_simulate.data"] == ["*.json"]
     assert not any(name == "simulate" or name.startswith("simulate.") for name in setuptools["packages"])
 
 

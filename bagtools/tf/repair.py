@@ -158,10 +158,12 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
         glitch = _glitches(translation[rows], _sign_aligned(_unit(rotation_xyzw[rows])))
         found.glitches = int(glitch.size)
         rows = np.delete(rows, glitch)
-    if rows.size >= 2:
-        step_m = np.linalg.norm(np.diff(translation[rows], axis=0), axis=1)
-        dt_s = np.diff(stamps_ns[rows]) / 1e9
-        jump = step_m > SPIKE_SPEED_MPS * dt_s + SPIKE_MIN_M
+    finite = rows[np.isfinite(translation[rows]).all(axis=1)]  # corrupt values are the buffer's to refuse
+    if finite.size >= 2:
+        step_m = np.linalg.norm(np.diff(translation[finite], axis=0), axis=1)
+        dt_s = np.diff(stamps_ns[finite]) / 1e9
+        with np.errstate(over="ignore", invalid="ignore"):
+            jump = step_m > SPIKE_SPEED_MPS * dt_s + SPIKE_MIN_M
         found.jumps = int(jump.sum())
         found.largest_jump_m = float(step_m[jump].max()) if found.jumps else 0.0
     found.drop = np.setdiff1d(np.arange(n), rows)
@@ -375,7 +377,8 @@ def static_value_conflicts(static: TfArrays | None) -> list[str]:
     if static is None or not len(static):
         return out
     for (parent, child), rows in _edges(static).items():
-        if rows.size < 2:
+        rows = rows[np.isfinite(static.translation[rows]).all(axis=1) & np.isfinite(static.rotation_xyzw[rows]).all(axis=1)]
+        if rows.size < 2:  # non-finite samples are refused where the buffer reads them
             continue
         t, q = static.translation[rows], static.rotation_xyzw[rows]
         q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
