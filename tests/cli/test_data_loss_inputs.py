@@ -92,24 +92,18 @@ def test_an_output_directory_that_holds_the_bag_takes_only_the_named_files(tmp_p
     assert snapshot(bag) == before
 
 
-def test_grid_refuses_a_poses_file_as_an_output(tmp_path: Path, capsys) -> None:
+@pytest.mark.parametrize("command, option, name", [
+    ("grid", "--poses", "summary.json"),
+    ("slam", "--relations", "trajectory.tum"),
+])
+def test_an_input_file_named_like_an_output_is_refused(command: str, option: str, name: str, tmp_path: Path,
+                                                       capsys) -> None:
+    """grid's --poses and slam's --relations are inputs: an output of the run with the same path is refused."""
     out = tmp_path / "out"
     out.mkdir()
-    traj = out / "summary.json"
-    traj.write_text("0 0 0 0 0 0 0 1\n")
+    (out / name).write_text("1.0 2.0 0 0 0 0 0 1\n")
     before = snapshot(tmp_path)
-    code, _, err = run(["grid", str(BAG), "--out", str(out), "--poses", str(traj), "--force"], capsys)
-    assert code == 2 and "is the input" in err, err
-    assert snapshot(tmp_path) == before
-
-
-def test_slam_refuses_a_relations_file_as_an_output(tmp_path: Path, capsys) -> None:
-    out = tmp_path / "out"
-    out.mkdir()
-    relations = out / "trajectory.tum"
-    relations.write_text("1.0 2.0 0 0 0 0 0 0\n")
-    before = snapshot(tmp_path)
-    code, _, err = run(["slam", str(BAG), "--out", str(out), "--relations", str(relations), "--force"], capsys)
+    code, _, err = run([command, str(BAG), "--out", str(out), option, str(out / name), "--force"], capsys)
     assert code == 2 and "is the input" in err, err
     assert snapshot(tmp_path) == before
 

@@ -10,18 +10,11 @@ import pytest
 from evo.core import metrics, sync
 from evo.core.trajectory import PoseTrajectory3D
 
-from bagtools.cli import main
 from bagtools.trajectory import Trajectory, relations_from_trajectory, relations_text, write_tum
 from bagtools.transforms import pose2tform
+from tests.cli.test_data_loss import run
 
 T0_NS = 1_700_000_000_000_000_000
-
-
-def run(argv: list[str], capsys) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    out = capsys.readouterr()
-    return exit_info.value.code, out.out, out.err
 
 
 @pytest.fixture
