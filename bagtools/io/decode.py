@@ -372,9 +372,17 @@ class TfArrays:
     stamp_ns: np.ndarray
     translation: np.ndarray
     rotation_xyzw: np.ndarray
+    publisher: np.ndarray | None = None  # (N,) str: who published each, where the bag says (ROS 1 callerid)
 
     def __len__(self) -> int:
         return int(self.stamp_ns.size)
+
+    def published_by(self, publisher: str) -> TfArrays:
+        """The same transforms, marked as published by ``publisher`` ('' leaves them unmarked)."""
+        if not publisher:
+            return self
+        return TfArrays(self.parent, self.child, self.stamp_ns, self.translation, self.rotation_xyzw,
+                        np.full(len(self), publisher, dtype=object))
 
     @staticmethod
     def empty() -> TfArrays:
@@ -386,7 +394,7 @@ class TfArrays:
     def select(self, rows: np.ndarray) -> TfArrays:
         """The transforms at ``rows`` (a bool mask or an index array)."""
         return TfArrays(self.parent[rows], self.child[rows], self.stamp_ns[rows], self.translation[rows],
-                        self.rotation_xyzw[rows])
+                        self.rotation_xyzw[rows], None if self.publisher is None else self.publisher[rows])
 
     @staticmethod
     def concatenate(parts: Iterable[TfArrays]) -> TfArrays:
@@ -394,12 +402,15 @@ class TfArrays:
         parts = [p for p in parts if len(p)]
         if not parts:
             return TfArrays.empty()
+        marked = any(p.publisher is not None for p in parts)
         return TfArrays(
             np.concatenate([p.parent for p in parts]),
             np.concatenate([p.child for p in parts]),
             np.concatenate([p.stamp_ns for p in parts]),
             np.concatenate([p.translation for p in parts]),
             np.concatenate([p.rotation_xyzw for p in parts]),
+            np.concatenate([p.publisher if p.publisher is not None else np.full(len(p), "", dtype=object)
+                            for p in parts]) if marked else None,
         )
 
 

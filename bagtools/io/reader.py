@@ -81,6 +81,7 @@ class RawRecord:
     msgtype: str
     log_time_ns: int
     raw: bytes | memoryview
+    publisher: str = ""  # the node that published it, where the bag says (a ROS 1 connection's callerid)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +92,7 @@ class Record:
     msgtype: str
     log_time_ns: int
     msg: Any
+    publisher: str = ""
 
 
 def sniff_kind(path: Path) -> str | None:
@@ -118,7 +120,7 @@ class _AnySource:
         if not conns:
             return
         for conn, t_ns, raw in self.reader.messages(connections=conns):
-            yield RawRecord(conn.topic, conn.msgtype, t_ns, raw)
+            yield RawRecord(conn.topic, conn.msgtype, t_ns, raw, getattr(conn.ext, "callerid", None) or "")
 
     def deserializer(self) -> Callable[[RawRecord], Any]:
         return lambda rec: self.reader.deserialize(rec.raw, rec.msgtype)
@@ -476,7 +478,7 @@ class BagReader:
             msg = self._deserialize(rec)
         except _READ_ERRORS as err:
             raise BagError(f"cannot decode a {rec.msgtype} message on {rec.topic}: {_one_line(err)}", self.path) from err
-        return Record(rec.topic, rec.msgtype, rec.log_time_ns, msg)
+        return Record(rec.topic, rec.msgtype, rec.log_time_ns, msg, rec.publisher)
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[Record]:
         """Yield deserialized messages of ``topics`` (all if None) in bag-time order.

@@ -48,7 +48,7 @@ class TfCollector:
         if rec.topic == self.static_topic:
             self._static.append(decode_tf_message(rec.msg))
         elif rec.topic == self.tf_topic:
-            arrays = decode_tf_message(rec.msg)
+            arrays = decode_tf_message(rec.msg).published_by(rec.publisher)
             self._dynamic.append(arrays)
             self._dynamic_arrival_ns.extend([rec.log_time_ns] * len(arrays))
 

@@ -108,10 +108,16 @@ MIN_STREAM_SAMPLES = 10
 INTERLEAVED_SHARE = 0.25
 
 
-def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: np.ndarray) -> EdgeFindings:
+def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: np.ndarray,
+                 publishers: np.ndarray | None = None) -> EdgeFindings:
     """Repeated stamps, interleaved publishers, corrupt leaps and glitches on one edge (rows in stamp order).
 
     In this order, each step on the samples the previous ones kept:
+
+    - Where the bag names each sample's publisher (``publishers``: a ROS 1
+      connection's callerid) and two nodes publish the edge, the streams are
+      told apart by name, whatever their rates, and the one that moves over
+      the larger extent is kept.
 
     - A stamp seen before keeps its first sample (tf2 ignores repeated data);
       it is a conflict when the values differ.
@@ -134,6 +140,11 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
     found = EdgeFindings()
     rows = _without_stray_stamps(stamps_ns)
     found.stray = n - rows.size
+    if publishers is not None:
+        named = _split_by_publisher(stamps_ns[rows], translation[rows], np.asarray(publishers)[rows])
+        if named is not None:
+            kept, found.interleaved = named
+            rows = rows[kept]
     repeated = rows[np.flatnonzero(stamps_ns[rows][1:] == stamps_ns[rows][:-1]) + 1]
     if repeated.size:
         first = np.searchsorted(stamps_ns, stamps_ns[repeated], side="left")
@@ -142,7 +153,7 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
                 _angle_between(_unit(rotation_xyzw[repeated]), _unit(rotation_xyzw[first])) > 1e-6)
         found.repeated, found.conflicting = int(repeated.size), int(differ.sum())
         rows = np.setdiff1d(rows, repeated)
-    if rows.size >= 5:
+    if rows.size >= 5 and not found.interleaved:
         t, q = translation[rows], _sign_aligned(_unit(rotation_xyzw[rows]))
         odd = _glitches(t, q)
         second = _second_stream(stamps_ns[rows], t, odd)
@@ -259,8 +270,24 @@ def _alternating(t: np.ndarray) -> bool:
     return whole > 1.0 and whole > 4.0 * halves
 
 
-def _split_streams(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> tuple[np.ndarray, str]:
-    """Two interleaved streams: the ``odd`` rows and the rest.
+def _split_by_publisher(stamps_ns: np.ndarray, t: np.ndarray, publishers: np.ndarray
+                        ) -> tuple[np.ndarray, str] | None:
+    """Two nodes publishing one edge, by the names the bag gives (None for one node, or a second with fewer
+    than MIN_STREAM_SAMPLES samples): the rows kept and a description naming both."""
+    names, counts = np.unique(publishers.astype(str), return_counts=True)
+    ranked = [(int(c), str(name)) for name, c in zip(names, counts) if name]
+    ranked.sort(reverse=True)
+    if len(ranked) < 2 or ranked[1][0] < MIN_STREAM_SAMPLES:
+        return None
+    first = ranked[0][1]
+    others = [name for _, name in ranked[1:]]
+    odd = np.flatnonzero(publishers.astype(str) != first)
+    return _split_streams(stamps_ns, t, odd, names=(" and ".join(others), first))
+
+
+def _split_streams(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray,
+                   names: tuple[str, str] | None = None) -> tuple[np.ndarray, str]:
+    """Two interleaved streams: the ``odd`` rows and the rest (``names``: their publishers, when known).
 
     Returns the rows of the stream kept (the one whose positions span more) and a description.
     """
@@ -279,10 +306,18 @@ def _split_streams(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> tup
         dur = (stamps_ns[rows[-1]] - stamps_ns[rows[0]]) / 1e9 if rows.size > 1 else 0.0
         return (rows.size - 1) / dur if dur > 0 else 0.0
 
-    streams.sort(key=span_m, reverse=True)
-    kept, dropped = streams
-    text = (f"two publishers interleaved: kept {kept.size} samples ({rate_hz(kept):.1f} Hz, spanning "
-            f"{span_m(kept):.3g} m), dropped {dropped.size} ({rate_hz(dropped):.1f} Hz, spanning {span_m(dropped):.3g} m)")
+    labels = {0: "", 1: ""} if names is None else {0: f" of {names[0]}", 1: f" of {names[1]}"}
+    order = sorted(range(2), key=lambda k: span_m(streams[k]), reverse=True)
+    kept, dropped = streams[order[0]], streams[order[1]]
+    who = "" if names is None else f" ({names[0]} and {names[1]}, by the bag's callerids)"
+    far = ""
+    if kept.size and dropped.size:
+        gap = np.nanmedian(np.linalg.norm(t[dropped] - t[kept[np.clip(np.searchsorted(kept, dropped), 0,
+                                                                           kept.size - 1)]], axis=1))
+        far = f"; the two are {gap:.3g} m apart"
+    text = (f"two publishers interleaved{who}: kept {kept.size} samples{labels[order[0]]} "
+            f"({rate_hz(kept):.1f} Hz, spanning {span_m(kept):.3g} m), dropped {dropped.size}{labels[order[1]]} "
+            f"({rate_hz(dropped):.1f} Hz, spanning {span_m(dropped):.3g} m){far}")
     return kept, text
 
 
@@ -295,7 +330,8 @@ def repair_dynamic_tf(dynamic: TfArrays, warnings: list[str]) -> tuple[TfArrays,
     """
     keep = np.ones(len(dynamic), dtype=bool)
     for (parent, child), rows in _edges(dynamic).items():
-        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows])
+        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows],
+                             None if dynamic.publisher is None else dynamic.publisher[rows])
         keep[rows[found.drop]] = False
         warnings.extend(describe_findings(parent, child, found, repaired=True))
     return (dynamic if keep.all() else dynamic.select(keep)), keep
@@ -314,7 +350,8 @@ def describe_findings(parent: str, child: str, found: EdgeFindings, repaired: bo
     elif found.repeated and repaired:
         out.append(f"{edge}: ignored {found.repeated} repeated sample(s) at a stamp already seen")
     if found.interleaved:
-        text = found.interleaved if repaired else found.interleaved.split(": kept")[0]
+        text = found.interleaved if repaired else (found.interleaved.replace(": kept", ": the mapping commands use")
+                                                   .replace(", dropped", ", not"))
         out.append(f"{edge}: {text}")
     if found.corrupt:
         out.append(f"dropped {found.corrupt} corrupt /tf samples {parent} -> {child} "
@@ -400,7 +437,8 @@ def tf_conflicts(dynamic: TfArrays, static: TfArrays) -> list[str]:
     glitches, stray stamps)."""
     out = parent_conflicts(dynamic, static)
     for (parent, child), rows in _edges(dynamic).items():
-        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows])
+        found = inspect_edge(dynamic.stamp_ns[rows], dynamic.translation[rows], dynamic.rotation_xyzw[rows],
+                             None if dynamic.publisher is None else dynamic.publisher[rows])
         out.extend(describe_findings(parent, child, found, repaired=False))
     return out
 

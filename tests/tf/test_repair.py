@@ -202,3 +202,55 @@ def test_a_jump_that_stays_is_said_not_repaired() -> None:
     assert any("/tf odom -> base_link: jumps 1 time(s), up to 1e+03 m at once" in w for w in said), said
     smooth = inspect_edge(stamps, np.c_[0.05 * np.arange(n), np.zeros((n, 2))], q)
     assert smooth.jumps == 0
+
+
+def test_two_nodes_on_one_edge_are_told_apart_by_their_callerids(tmp_path, capsys) -> None:
+    """A real bag has odom -> base_link from wheel odometry (50 Hz) and a SLAM node (100 Hz) 1.7 m apart: no
+    zig-zag a path test sees, but the ROS 1 connections name each publisher. info says so and which stream the
+    mapping commands use; a buffer read through the repair keeps that one."""
+    import pytest
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from bagtools.cli import main
+    from bagtools.io import open_bag, read_tf_arrays
+    from bagtools.tf import TfBuffer
+
+    from rosbags.typesys import get_types_from_msg
+
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
+    ros1.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    T = ros1.types
+
+    def tf(stamp_ns: int, x: float, y: float):
+        header = T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](
+            sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000), frame_id="odom")
+        ts = T["geometry_msgs/msg/TransformStamped"](header=header, child_frame_id="base_link", transform=T[
+            "geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),
+                                           rotation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+        return ros1.serialize_ros1(T["tf2_msgs/msg/TFMessage"](transforms=[ts]), "tf2_msgs/msg/TFMessage")
+
+    t0 = 1_700_000_000_000_000_000
+    bag = tmp_path / "two_nodes.bag"
+    with Writer(bag) as writer:
+        wheels = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ros1, callerid="/wheel_odometry")
+        slam = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ros1, callerid="/slam_node")
+        messages = [(t0 + i * 20_000_000, wheels, 0.01 * i, 0.0) for i in range(500)]
+        messages += [(t0 + 5_000_000 + i * 10_000_000, slam, 0.005 * i, 1.7) for i in range(1000)]
+        for stamp, conn, x, y in sorted(messages, key=lambda m: m[0]):
+            writer.write(conn, stamp, tf(stamp, x, y))
+    with open_bag(bag) as reader:
+        dynamic, _ = read_tf_arrays(reader)
+    assert set(dynamic.publisher) == {"/wheel_odometry", "/slam_node"}
+    said = [w for w in tf_conflicts(dynamic, TfArrays.empty()) if "two publishers interleaved" in w]
+    assert len(said) == 1 and "(/wheel_odometry and /slam_node, by the bag's callerids)" in said[0], said
+    assert "the mapping commands use 1000 samples of /slam_node" in said[0]
+    assert ", not 500 of /wheel_odometry" in said[0] and "the two are 1.7 m apart" in said[0]
+    with pytest.raises(SystemExit):
+        main(["info", str(bag)])
+    assert "two publishers interleaved" in capsys.readouterr().err
+    warnings: list[str] = []
+    repaired, _ = repair_dynamic_tf(dynamic, warnings)
+    assert any("kept 1000 samples of /slam_node" in w for w in warnings), warnings
+    assert set(repaired.publisher) == {"/slam_node"}
+    assert TfBuffer.from_bag(bag).lookup("odom", "base_link", t0 + 2_000_000_000)[1, 3] == pytest.approx(1.7)
