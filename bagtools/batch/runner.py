@@ -141,6 +141,7 @@ class BatchRun:
         if self.plan.tasks:
             with self._client() as client:
                 self._check_workers(client)
+                self._announce(client)  # only once the workers can run the batch: no start line before an error
                 claim_out_dir(self.plan.out_dir, self.plan.command)
                 futures = self._submit(client, self.plan.tasks)
                 try:
@@ -174,10 +175,6 @@ class BatchRun:
                 if not client.nthreads():
                     self.notify(f"waiting for a Dask worker to join {self.cluster.scheduler} ...")
                     client.wait_for_workers(1)
-                n = len(client.nthreads())
-                self.notify(f"{len(self.plan.tasks)} bags to run on the Dask cluster at {self.cluster.scheduler} "
-                            f"({n} workers now)")
-                self._announce_dashboard(client, remote=True)
                 yield client
             finally:
                 client.close()
@@ -198,10 +195,19 @@ class BatchRun:
                     n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.CRITICAL,
                     dashboard_address=":8787" if bokeh else ":0", preload=["bagtools.batch.worker"]))
                 client = stack.enter_context(Client(cluster))
-            self.notify(f"{len(self.plan.tasks)} bags to run on {n} local worker process{'es' if n > 1 else ''}")
-            if bokeh:
-                self._announce_dashboard(client, remote=False)
             yield client
+
+    def _announce(self, client: Any) -> None:
+        """Say where the bags run, and the dashboard's address when there is one."""
+        n = len(client.nthreads())
+        if self.cluster.scheduler:
+            self.notify(f"{len(self.plan.tasks)} bags to run on the Dask cluster at {self.cluster.scheduler} "
+                        f"({n} workers now)")
+            self._announce_dashboard(client, remote=True)
+        else:
+            self.notify(f"{len(self.plan.tasks)} bags to run on {n} local worker process{'es' if n > 1 else ''}")
+            if importlib.util.find_spec("bokeh") is not None:
+                self._announce_dashboard(client, remote=False)
 
     def _announce_dashboard(self, client: Any, remote: bool) -> None:
         """Print the dashboard address when the scheduler serves one (it needs bokeh)."""

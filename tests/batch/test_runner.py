@@ -72,3 +72,33 @@ def test_a_silent_listener_is_not_taken_for_a_scheduler() -> None:
         server.close()
     with pytest.raises(BagtoolsError, match="cannot reach the Dask scheduler"):
         check_speaks_dask(f"tcp://127.0.0.1:{port}", wait_s=0.5)
+
+
+def test_no_start_line_before_the_workers_are_found_able(monkeypatch, tmp_path) -> None:
+    """The batch said 'N bags to run on the Dask cluster' and then failed its worker check: the line now comes
+    only once every worker can run the batch."""
+    from contextlib import contextmanager
+
+    import pytest
+
+    from bagtools.batch.plan import BatchPlan
+    from bagtools.batch.runner import BatchRun
+    from bagtools.errors import BagtoolsError
+
+    class _Client:
+        def nthreads(self) -> dict:
+            return {"tcp://w:1": 1}
+
+        def run(self, fn, *args):
+            return {"tcp://w:1": "cannot see /data"}
+
+    @contextmanager
+    def fake_client(self):
+        yield _Client()
+
+    monkeypatch.setattr(BatchRun, "_client", fake_client)
+    plan = BatchPlan("grid", None, tmp_path / "out", False, [(tmp_path / "run1.mcap", "run1")], tasks=[TASK])
+    said: list[str] = []
+    with pytest.raises(BagtoolsError, match="cannot see /data"):
+        BatchRun(plan, ClusterSpec(scheduler="tcp://head:8786"), said.append).run()
+    assert said == [] and not (tmp_path / "out").exists()
