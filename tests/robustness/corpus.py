@@ -28,6 +28,7 @@ only its own names on success, and must leave every byte as it was on failure.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import random
@@ -1388,14 +1389,22 @@ def _data_loss_cases(B: _Builder) -> None:
         B.add_runs("dataloss-simulate-over-user-file", "data-loss", None,
                    [Run("simulate", ["simulate", str(watch / "notes.txt"), "--duration", "1", "--no-cloud", "--force"],
                         "error", watch=watch, prefill=dict(USER_FILES), names=(str(watch / "notes.txt"),))])
-        # simulate over its own earlier bag with --force: allowed (replaces the bag only).
+        # simulate over its own earlier bag (it carries bagtools' mark) with --force: allowed (replaces the bag only).
         watch = B.out_dir("dataloss-simulate-over-own-bag", "w")
         src = B.scene_bag("mcap")
-        prefill = {**USER_FILES, "sim": None, "sim/metadata.yaml": (src / "metadata.yaml").read_bytes(),
-                   "sim/sim_0.mcap": (src / "scene_mcap.mcap").read_bytes()}
+        bag_files = {"sim/metadata.yaml": (src / "metadata.yaml").read_bytes(),
+                     "sim/sim_0.mcap": (src / "scene_mcap.mcap").read_bytes()}
+        mark = json.dumps({"written_by": "bagtools simulate", "files": ["metadata.yaml", "sim_0.mcap"]}).encode()
+        prefill = {**USER_FILES, "sim": None, **bag_files, "sim/.bagtools-output.json": mark}
         B.add_runs("dataloss-simulate-over-own-bag", "data-loss", None,
                    [Run("simulate", ["simulate", str(watch / "sim"), "--duration", "1", "--no-cloud", "--force"], "ok",
                         watch=watch, prefill=prefill, own=("sim",), names=(str(watch / "sim"),))])
+        # ... but a recording of the same shape without the mark (ros2 bag record's) is never replaced.
+        watch = B.out_dir("dataloss-simulate-over-recording", "w")
+        B.add_runs("dataloss-simulate-over-recording", "data-loss", None,
+                   [Run("simulate", ["simulate", str(watch / "sim"), "--duration", "1", "--no-cloud", "--force"],
+                        "error", watch=watch, prefill={**USER_FILES, "sim": None, **bag_files},
+                        names=(str(watch / "sim"),))])
     # A failed run into a fresh --out must not leave the directory behind.
     missing = B.inputs / "dataloss/missing_bag"
     for command in B.pick(("grid",), ("tf point", "map-cloud", "ndt-odom", "grid")):
