@@ -39,7 +39,7 @@ from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, rpe_frames, rpe_translation
-from bagtools.transforms import pose2tform, quat2tform, tform2pose, xyzw2quat
+from bagtools.transforms import pose2tform, tform2pose
 
 INIT_MODES = ("auto", *GUESSES)
 #: Returns farther than this are not matched (m): no 2D laser places the robot better by them than by its near
@@ -177,7 +177,6 @@ class NdtOdomPipeline:
         self.seqs: list[int | None] = []
         self.reordered = 0
         self.repeated = 0
-        self._raw_odometry: TfArrays | None = None
 
     def run(self) -> NdtOdomResult:
         with open_bag(self.bag_path) as bag:
@@ -250,7 +249,6 @@ class NdtOdomPipeline:
             edge = (parents == self.odom_frame) & (children == self.base_frame)
             if edge.any():
                 self.odometry_source = f"/tf {self.odom_frame} -> {self.base_frame}"
-                self._raw_odometry = dynamic.select(edge)
                 if late_ns.size:  # /odom's seq says which of the edge's samples are stamped out of order
                     dynamic = dynamic.select(~(edge & np.isin(dynamic.stamp_ns, late_ns)))
                 dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
@@ -303,7 +301,8 @@ class NdtOdomPipeline:
             return np.arange(len(stamps))
         moved = int(np.count_nonzero(np.diff(stamps[order]) < 0))  # scans stamped before the one recorded before them
         self.warnings.append(f"{moved} scan(s) on {self.options.topic} are stamped before the scan recorded before "
-                             "them (header.seq): registered in recording order, each posed at its own stamp")
+                             "them (header.seq): registered in recording order, each posed at its own stamp, "
+                             "with no odometry guess")
         self.reordered = moved
         return order
 
@@ -376,27 +375,12 @@ class NdtOdomPipeline:
                              "before them (header.seq): not used")
         return late
 
-    def _own_odometry(self, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(T_odom_base (N,4,4), found (N,)): the odometry sample recorded at each very stamp, as recorded."""
-        raw = self._raw_odometry
-        T = np.tile(np.eye(4), (len(stamps), 1, 1))
-        if raw is None or len(raw) == 0:
-            return T, np.zeros(len(stamps), dtype=bool)
-        order = np.argsort(raw.stamp_ns, kind="stable")
-        at = np.clip(np.searchsorted(raw.stamp_ns[order], stamps), 0, len(raw) - 1)
-        rows = order[at]
-        found = raw.stamp_ns[rows] == stamps
-        T[found] = quat2tform(xyzw2quat(raw.rotation_xyzw[rows[found]]))
-        T[found, :3, 3] = raw.translation[rows[found]]
-        return T, found
-
     def _odometry_at(self, stamps: np.ndarray, out_of_order: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray] | None:
         """(T_odom_base (N,4,4), valid (N,)) at the scan stamps; stamps outside the data take the nearest end.
 
         A scan stamped out of its recording order (``out_of_order``) had its odometry stamped the same way:
-        the stream interpolated at its stamp belongs to another time (and the repair took its own sample
-        for a glitch), so it takes the sample recorded at its very stamp, or no odometry guess."""
+        the stream interpolated at its stamp belongs to another time, so it takes no odometry guess."""
         if not self._has_odometry() or self.buffer is None or self.base_frame is None:
             return None
         first, last = self.buffer.frame_time_range(self.base_frame) or (int(stamps[0]), int(stamps[-1]))
@@ -412,13 +396,11 @@ class NdtOdomPipeline:
             nearest = good[np.clip(np.searchsorted(good, np.arange(len(ok))), 0, good.size - 1)]
             T = T[nearest]
         valid &= ok
-        if out_of_order is not None and out_of_order.any():
-            own, found = self._own_odometry(stamps[out_of_order])
-            T[out_of_order] = own
-            valid[out_of_order] = found
         if not valid.all():
             self.warnings.append(f"{int((~valid).sum())} scan(s) lie outside the odometry's time range: "
                                  "their guesses use constant velocity")
+        if out_of_order is not None:
+            valid &= ~out_of_order  # said with the recording order (see _order)
         return T, valid
 
     def _register(self, stamps: np.ndarray, points: list[np.ndarray], odometry) -> LaserOdometry:
