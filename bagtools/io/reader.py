@@ -325,7 +325,7 @@ class BagReader:
 
     Attributes:
         path: what the user named.
-        kind: 'rosbag2' (directory), 'mcap', 'sqlite3' or 'ros1'.
+        kind: 'rosbag2' (directory), 'mcap', 'sqlite3', 'ros1' or 'carmen' (a CARMEN log, :mod:`bagtools.io.carmen`).
         topics: topic name -> :class:`TopicInfo`.
         start_ns, end_ns: first and last bag (log) time, int nanoseconds.
         warnings: things the user should know (e.g. a truncated file was recovered).
@@ -357,7 +357,12 @@ class BagReader:
             raise BagError("file is empty, not a bag", path)
         kind = sniff_kind(path)
         if kind is None:
-            raise BagError("not a ROS bag (expected MCAP, rosbag2 sqlite3 or ROS 1 bag data)", path)
+            from bagtools.io.carmen import CarmenSource, looks_like_carmen  # it builds on this module's records
+            if looks_like_carmen(path):
+                source = CarmenSource(path)
+                self.warnings.extend(source.warnings)
+                return "carmen", source
+            raise BagError("not a ROS bag (expected MCAP, rosbag2 sqlite3 or ROS 1 bag data, or a CARMEN log)", path)
         if path.suffix != _SUFFIX_BY_KIND[kind]:
             raise BagError(f"file holds {kind} data but is named '{path.suffix}'; rename it to '{_SUFFIX_BY_KIND[kind]}'", path)
         return kind, self._open_file(path, kind)

@@ -144,10 +144,10 @@ def storage_details(bag: Any) -> StorageDetails:
     files = [Path(p) for p in bag.storage_files()]
     storage_id = str(info.get("storage_identifier") or "") if info else ""
     if not storage_id:
-        storage_id = {"mcap": "mcap", "sqlite3": "sqlite3", "ros1": "ros1"}.get(bag.kind, "")
+        storage_id = {"mcap": "mcap", "sqlite3": "sqlite3", "ros1": "ros1", "carmen": "carmen"}.get(bag.kind, "")
         if not storage_id and files:
             storage_id = "mcap" if files[0].suffix == ".mcap" else "sqlite3"
-    ros_version = 1 if storage_id == "ros1" or any(s.profile == "ros1" for s in scans) else 2
+    ros_version = 1 if storage_id in ("ros1", "carmen") or any(s.profile == "ros1" for s in scans) else 2
     distro = str(info["ros_distro"]) if info and info.get("ros_distro") else None
     distro = distro or next((d for s in scans if (d := _mcap_distro(s))), None)
     topics: dict[str, TopicStorage] = {}

@@ -8,11 +8,15 @@ the front end goes wrong there and the map breaks.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rosbags.rosbag1 import Reader, Writer
 
+from bagtools.io import decode_odometry, open_bag
+from bagtools.io.carmen import FLASER_MAX_RANGE_M
 from bagtools.slam import SlamOptions, SlamPipeline
 from tests.conftest import REPO
 
@@ -54,4 +58,44 @@ def test_intel_holds_where_scans_and_odometry_are_stamped_out_of_order(intel_hea
     scored = summary["relations"]["slam"]
     assert scored["used"] > 300
     # Cartographer's figure for the whole log is 0.0229 m; no relation may break the map.
+    assert scored["trans_mean_m"] < 0.03 and scored["trans_max_m"] < 1.0, scored
+
+
+@pytest.fixture(scope="module")
+def intel_head_carmen(intel_head: Path) -> Path:
+    """The same 2500 scans as the CARMEN log they came from: FLASER lines in the order the robot recorded them,
+    each with its odometry pose and its stamp to the microsecond. Read back, the beams take CARMEN's own
+    spacing (1 degree from -90), not the bag's (180/179 degrees)."""
+    scans, odom = [], []
+    with open_bag(intel_head) as bag:
+        for rec in bag.messages(["/scan", "/odom"]):
+            stamp = rec.msg.header.stamp
+            text = f"{stamp.sec}.{stamp.nanosec // 1000:06d}"
+            if rec.topic == "/scan":
+                ranges = np.where(np.isfinite(rec.msg.ranges), rec.msg.ranges, FLASER_MAX_RANGE_M)
+                scans.append((rec.msg.header.seq, text, stamp.sec + stamp.nanosec * 1e-9, ranges))
+            else:
+                sample = decode_odometry(rec.msg)
+                x, y, _ = sample.position_m
+                qx, qy, qz, qw = sample.orientation_xyzw
+                odom.append((sample.stamp_ns * 1e-9, (x, y, math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)))))
+    odom.sort(key=lambda o: o[0])
+    times = np.array([o[0] for o in odom])
+    path = intel_head.with_name("intel_head.clf")
+    with path.open("w") as f:
+        for _, text, t, ranges in sorted(scans, key=lambda s: s[0]):
+            x, y, th = odom[int(np.argmin(np.abs(times - t)))][1]
+            f.write(f"FLASER {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {x:.6f} {y:.6f} {th:.6f} "
+                    f"{x:.6f} {y:.6f} {th:.6f} {text} nohost {text}\n")
+    return path
+
+
+@pytest.mark.parametrize("use_odometry", [False, True])
+def test_intel_holds_read_from_its_carmen_log(intel_head_carmen: Path, use_odometry: bool) -> None:
+    """The benchmark's own format, read natively (CARMEN's beam angles, odometry from the laser lines)."""
+    options = SlamOptions(use_odometry=use_odometry, relations=str(BENCHMARK_DIR / "intel.relations"))
+    summary = SlamPipeline(intel_head_carmen, options).run().summary
+    assert summary["scans"] == FIRST_SCANS
+    scored = summary["relations"]["slam"]
+    assert scored["used"] > 300
     assert scored["trans_mean_m"] < 0.03 and scored["trans_max_m"] < 1.0, scored

@@ -1,0 +1,339 @@
+"""CARMEN logs (``.clf``, ``.log``, gzipped or not) read as a bag: the classic 2D SLAM datasets as distributed.
+
+What each line becomes (messages in the ROS 1 types, so that ``header.seq`` says the recording order):
+
+- ``ROBOTLASER1``, ``FLASER`` and ``RAWLASER1`` (the front laser) -> ``/scan``; ``ROBOTLASER2``, ``RLASER``
+  and ``RAWLASER2`` (the rear laser) -> ``/scan_rear``; ``RAWLASER3``/``RAWLASER4`` -> ``/scan3``/``/scan4``.
+  Newer logs carry one scan on several lines (ROBOTLASER1 and FLASER): a topic takes only the first kind of its
+  laser that the log holds, in that order. A reading at or beyond the maximum range becomes +inf.
+- The odometry pose of a ``FLASER``/``RLASER``/``ROBOTLASER`` line, and each ``ODOM`` line -> ``/odom``
+  (nav_msgs/Odometry, ``odom`` -> ``base_link``) and ``/tf`` (odom -> base_link).
+- The front laser's mount -> ``/tf_static`` (base_link -> laser, and base_link -> rear_laser turned by pi):
+  ``ROBOTLASER1``'s laser pose against its robot pose (the first line's), else ``PARAM robot_frontlaser_offset``
+  (metres ahead of the base), else none.
+- Stamps are each line's ``ipc_timestamp``, exact to the nanosecond (parsed as decimal text, never a float):
+  the benchmarks' ``.relations`` files use them.
+
+Beam angles. ``ROBOTLASER``/``RAWLASER`` lines carry start angle, field of view and angular resolution, and are
+used as they say. ``FLASER``/``RLASER`` lines carry only the beam count: the angles are CARMEN's own
+(``carmen_laser_get_fov`` and ``carmen_laser_get_angle_increment`` in CARMEN's laser interface, which its
+``readlog`` applies to these lines): the first beam at -90 degrees, then 1 degree apart for 180 or 181 beams,
+0.5 degree for 360 or 361, 0.25 degree for 400 or 401, else 180 degrees spread over the beams. So 180 beams
+span -90 to +89 degrees, not -90 to +90 (180/179 degrees apart) as some conversions assume. The maximum range
+of these lines is ``PARAM robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else
+:data:`FLASER_MAX_RANGE_M`.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from bagtools.io.reader import RawRecord, TopicInfo
+
+#: Suffixes of a CARMEN log (optionally followed by .gz).
+CARMEN_SUFFIXES = (".clf", ".log")
+#: A FLASER/RLASER line says no maximum range: SICK LMS lasers of these logs report no return at 81.83-81.91 m.
+FLASER_MAX_RANGE_M = 81.83
+#: Frames of the presented bag.
+ODOM_FRAME, BASE_FRAME = "odom", "base_link"
+SCAN_MSGTYPE, ODOM_MSGTYPE, TF_MSGTYPE = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
+
+#: Laser line kinds per topic, in the order a topic prefers them, and each topic's frame.
+_LASERS = {
+    "/scan": (("ROBOTLASER1", "FLASER", "RAWLASER1"), "laser"),
+    "/scan_rear": (("ROBOTLASER2", "RLASER", "RAWLASER2"), "rear_laser"),
+    "/scan3": (("RAWLASER3",), "laser3"),
+    "/scan4": (("RAWLASER4",), "laser4"),
+}
+_TOPIC_OF_KIND = {kind: topic for topic, (kinds, _) in _LASERS.items() for kind in kinds}
+_ODOM_KINDS = ("ODOM", "FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2")
+_KNOWN = set(_TOPIC_OF_KIND) | {"ODOM", "PARAM"}
+
+
+def looks_like_carmen(path: Path) -> bool:
+    """True if ``path`` is named as a CARMEN log (.clf/.log, optionally .gz) and its first line that is not a
+    comment starts with a CARMEN keyword."""
+    name = path.name.lower()
+    stem = name[:-3] if name.endswith(".gz") else name
+    if not stem.endswith(CARMEN_SUFFIXES):
+        return False
+    try:
+        opener = gzip.open if name.endswith(".gz") else open
+        with opener(path, "rb") as f:
+            head = f.read(65536)
+    except (OSError, EOFError):
+        return False
+    for line in head.splitlines():
+        words = line.split()
+        if not words or words[0].startswith(b"#"):
+            continue
+        return words[0].decode("ascii", "replace") in _KNOWN or words[0].isupper()
+    return False
+
+
+def stamp_text_to_ns(text: str) -> int:
+    """A decimal seconds string ("1234.567890") as int nanoseconds, exactly (no float on the way)."""
+    whole, _, frac = text.strip().partition(".")
+    if not whole.lstrip("-").isdigit() or (frac and not frac.isdigit()):
+        raise ValueError(f"not a timestamp: {text!r}")
+    sign = -1 if whole.startswith("-") else 1
+    return sign * (abs(int(whole)) * 1_000_000_000 + int((frac + "000000000")[:9] or 0))
+
+
+@dataclass(frozen=True)
+class _Laser:
+    """What a laser line says: the scan geometry, ranges, the line's odometry and laser poses, its stamp."""
+
+    stamp_ns: int
+    start_rad: float
+    increment_rad: float
+    max_range_m: float
+    ranges: np.ndarray
+    odom: tuple[float, float, float] | None  # the robot's odometry pose
+    laser_in_base: tuple[float, float, float] | None  # the laser's pose on the robot, where the line says
+
+
+def carmen_beam_geometry(n: int) -> tuple[float, float]:
+    """(start, increment) in radians of a FLASER/RLASER line of ``n`` beams, as CARMEN defines them (module
+    docstring)."""
+    if n in (180, 181):
+        increment = math.pi / 180.0
+    elif n in (360, 361):
+        increment = math.pi / 360.0
+    elif n in (400, 401):
+        increment = math.pi / 720.0
+    else:
+        increment = math.pi / max(n - 1, 1)
+    return -math.pi / 2.0, increment
+
+
+def _floats(words: list[bytes]) -> list[float]:
+    return [float(w) for w in words]
+
+
+def _stamp(word: bytes) -> int:
+    return stamp_text_to_ns(word.decode("ascii", "replace"))
+
+
+def _stamp_index(kind: str, words: list[bytes]) -> int:
+    """Where a line's ipc_timestamp is among ``words`` (the line without its keyword), without parsing the rest."""
+    if kind == "ODOM":
+        return 6
+    if kind in ("FLASER", "RLASER"):
+        return 7 + int(words[0])
+    k = 8 + int(words[7])
+    k += 1 + int(words[k])  # the remissions
+    return k if kind.startswith("RAWLASER") else k + 11
+
+
+def _parse_laser(kind: str, words: list[bytes], params: dict[str, float]) -> _Laser:
+    """One laser line (``words`` without the keyword)."""
+    if kind in ("FLASER", "RLASER"):
+        n = int(words[0])
+        ranges = np.asarray(_floats(words[1:1 + n]), dtype=np.float32)
+        x, y, th, ox, oy, oth = _floats(words[1 + n:7 + n])
+        start, increment = carmen_beam_geometry(n)
+        side = "front" if kind == "FLASER" else "rear"
+        max_range = params.get(f"robot_{side}_laser_max", FLASER_MAX_RANGE_M)
+        return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, (ox, oy, oth), None)
+    # RAWLASERk / ROBOTLASERk: laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
+    start, _fov, increment, max_range = _floats(words[1:5])
+    n = int(words[7])
+    ranges = np.asarray(_floats(words[8:8 + n]), dtype=np.float32)
+    k = 8 + n
+    n_remissions = int(words[k])
+    k += 1 + n_remissions
+    if kind.startswith("RAWLASER"):
+        return _Laser(_stamp(words[k]), start, increment, max_range, ranges, None, None)
+    lx, ly, lth, rx, ry, rth = _floats(words[k:k + 6])
+    c, s = math.cos(rth), math.sin(rth)
+    mount = (c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), math.remainder(lth - rth, 2 * math.pi))
+    return _Laser(_stamp(words[k + 11]), start, increment, max_range, ranges, (rx, ry, rth), mount)
+
+
+def _parse_odom(words: list[bytes]) -> tuple[int, tuple[float, float, float]]:
+    x, y, th = _floats(words[0:3])
+    return _stamp(words[6]), (x, y, th)
+
+
+class CarmenSource:
+    """A CARMEN log as a bag source (the interface of :mod:`bagtools.io.reader`'s sources).
+
+    The log is read once when opened (kept as its lines: a few tens of MB for the longest benchmark logs) and
+    every record is sorted by stamp; a record's raw bytes are its index in its topic's recording order and its
+    line, which :meth:`deserializer` turns into a message. Lines that cannot be parsed are skipped and counted
+    in ``warnings``.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        opener = gzip.open if path.name.lower().endswith(".gz") else open
+        with opener(path, "rb") as f:
+            self._lines = f.read().splitlines()
+        self.warnings: list[str] = []
+        self._types = _typestore()
+        self.params: dict[str, float] = {}  # PARAM lines, as they come (a parameter logged later is not yet known)
+        lines: list[tuple[int, str, int]] = []  # (line index, kind, stamp) of the laser and odometry lines
+        bad: Counter[str] = Counter()
+        unknown: Counter[str] = Counter()
+        first_bad = ""
+        self._mount: tuple[float, float, float] | None = None
+        for i, line in enumerate(self._lines):
+            words = line.split()
+            if not words or words[0].startswith(b"#"):
+                continue
+            kind = words[0].decode("ascii", "replace")
+            if kind == "PARAM" and len(words) >= 3:
+                try:
+                    self.params[words[1].decode("ascii", "replace")] = float(words[2])
+                except ValueError:
+                    pass
+                continue
+            if kind not in _TOPIC_OF_KIND and kind != "ODOM":
+                unknown[kind] += 1
+                continue
+            text = words[1:]
+            try:
+                at = _stamp_index(kind, text)
+                if len(text) < at + 1:
+                    raise IndexError(f"{kind} line ends early ({len(text)} fields)")
+                stamp = _parse_odom(text)[0] if kind == "ODOM" else _stamp(text[at])
+                if self._mount is None and kind == "ROBOTLASER1":
+                    self._mount = _parse_laser(kind, text, self.params).laser_in_base
+            except (ValueError, IndexError) as err:
+                bad[kind] += 1
+                first_bad = first_bad or f"line {i + 1}: {err}"
+                continue
+            lines.append((i, kind, stamp))
+        kinds = Counter(kind for _, kind, _ in lines)
+        chosen = {topic: next((k for k in pref if kinds[k]), None) for topic, (pref, _) in _LASERS.items()}
+        self._kind_of_topic = {t: k for t, k in chosen.items() if k is not None}
+        used = set(self._kind_of_topic.values()) | {"ODOM"}
+        records: list[tuple[int, int, str, int]] = []  # (stamp, line index, topic, seq)
+        seq: Counter[str] = Counter()
+        for i, kind, stamp in lines:
+            if kind not in used:
+                continue
+            topics = ["/odom", "/tf"] if kind == "ODOM" else [_TOPIC_OF_KIND[kind]]
+            if kind in _ODOM_KINDS[1:]:
+                topics += ["/odom", "/tf"]
+            for topic in topics:
+                records.append((stamp, i, topic, seq[topic]))
+                seq[topic] += 1
+        if self._mount is None and "robot_frontlaser_offset" in self.params and "/scan" in self._kind_of_topic:
+            self._mount = (self.params["robot_frontlaser_offset"], 0.0, 0.0)
+        if bad:
+            counts = ", ".join(f"{n} {k}" for k, n in bad.items())
+            self.warnings.append(f"{path}: {counts} line(s) could not be read and were skipped ({first_bad})")
+        if unknown:
+            counts = ", ".join(f"{n} {k}" for k, n in unknown.most_common(5))
+            self.warnings.append(f"{path}: lines of kinds bagtools does not read were skipped ({counts})")
+        records.sort(key=lambda r: (r[0], r[1]))
+        if records and self._has_static():
+            records.insert(0, (records[0][0], -1, "/tf_static", 0))
+        self._records = records
+        counts = Counter(r[2] for r in records)
+        msgtypes = {"/odom": ODOM_MSGTYPE, "/tf": TF_MSGTYPE, "/tf_static": TF_MSGTYPE}
+        self.topics = {t: TopicInfo(t, msgtypes.get(t, SCAN_MSGTYPE), n) for t, n in counts.items()}
+        self.start_ns = records[0][0] if records else 0
+        self.end_ns = records[-1][0] if records else 0
+        self.message_count = len(records)
+
+    def _has_static(self) -> bool:
+        return self._mount is not None or "/scan_rear" in self._kind_of_topic
+
+    def raw(self, topics: set[str] | None) -> Iterator[RawRecord]:
+        for stamp, i, topic, seq in self._records:
+            if topics is None or topic in topics:
+                line = b"" if i < 0 else self._lines[i]
+                yield RawRecord(topic, self.topics[topic].msgtype, stamp, b"%d %s" % (seq, line))
+
+    def deserializer(self) -> Callable[[Any], Any]:
+        return self._message
+
+    def close(self) -> None:
+        self._lines = []
+
+    # -- messages --------------------------------------------------------------------------------
+
+    def _message(self, rec: Any) -> Any:
+        seq_text, _, line = bytes(rec.raw).partition(b" ")
+        seq = int(seq_text)
+        if rec.topic == "/tf_static":
+            return self._static(rec.log_time_ns)
+        words = line.split()
+        kind, text = words[0].decode("ascii", "replace"), words[1:]
+        if kind == "ODOM":
+            stamp, pose = _parse_odom(text)
+        else:
+            laser = _parse_laser(kind, text, self.params)
+            stamp, pose = laser.stamp_ns, laser.odom
+            if rec.topic not in ("/odom", "/tf"):
+                return self._scan(laser, rec.topic, seq)
+        if rec.topic == "/odom":
+            return self._odometry(stamp, pose, seq)
+        return self._types["tf2_msgs/msg/TFMessage"](transforms=[self._transform(stamp, ODOM_FRAME, BASE_FRAME, pose, seq)])
+
+    def _header(self, stamp_ns: int, frame: str, seq: int) -> Any:
+        t = self._types
+        return t["std_msgs/msg/Header"](seq=seq, stamp=t["builtin_interfaces/msg/Time"](
+            sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000), frame_id=frame)
+
+    def _scan(self, laser: _Laser, topic: str, seq: int) -> Any:
+        ranges = laser.ranges.astype(np.float32)
+        ranges[ranges >= laser.max_range_m] = np.inf
+        n = ranges.size
+        return self._types[SCAN_MSGTYPE](
+            header=self._header(laser.stamp_ns, _LASERS[topic][1], seq),
+            angle_min=laser.start_rad, angle_max=laser.start_rad + (n - 1) * laser.increment_rad,
+            angle_increment=laser.increment_rad, time_increment=0.0, scan_time=0.0,
+            range_min=0.001, range_max=float(laser.max_range_m), ranges=ranges, intensities=np.zeros(0, np.float32))
+
+    def _pose(self, pose: tuple[float, float, float]) -> Any:
+        t = self._types
+        x, y, th = pose
+        return t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)))
+
+    def _odometry(self, stamp_ns: int, pose: tuple[float, float, float], seq: int) -> Any:
+        t = self._types
+        zero = t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+        return t[ODOM_MSGTYPE](
+            header=self._header(stamp_ns, ODOM_FRAME, seq), child_frame_id=BASE_FRAME,
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=self._pose(pose), covariance=np.zeros(36)),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](
+                twist=t["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)))
+
+    def _transform(self, stamp_ns: int, parent: str, child: str, pose: tuple[float, float, float], seq: int) -> Any:
+        t = self._types
+        p = self._pose(pose)
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=self._header(stamp_ns, parent, seq), child_frame_id=child,
+            transform=t["geometry_msgs/msg/Transform"](
+                translation=t["geometry_msgs/msg/Vector3"](x=p.position.x, y=p.position.y, z=0.0), rotation=p.orientation))
+
+    def _static(self, stamp_ns: int) -> Any:
+        transforms = []
+        if self._mount is not None:
+            transforms.append(self._transform(stamp_ns, BASE_FRAME, _LASERS["/scan"][1], self._mount, 0))
+        if "/scan_rear" in self._kind_of_topic:
+            offset = self.params.get("robot_rearlaser_offset", 0.0)
+            transforms.append(self._transform(stamp_ns, BASE_FRAME, _LASERS["/scan_rear"][1], (offset, 0.0, math.pi), 0))
+        return self._types[TF_MSGTYPE](transforms=transforms)
+
+
+def _typestore() -> dict[str, Any]:
+    """The ROS 1 message classes (with header.seq), tf2_msgs/TFMessage added."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MSGTYPE))
+    return store.types

@@ -1,0 +1,144 @@
+"""CARMEN logs read as bags (bagtools.io.carmen): every line kind, exact stamps, CARMEN's beam angles."""
+
+from __future__ import annotations
+
+import gzip
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagtools.errors import BagError
+from bagtools.io import decode_laserscan, decode_odometry, decode_tf_message, open_bag
+from bagtools.io.carmen import FLASER_MAX_RANGE_M, carmen_beam_geometry, stamp_text_to_ns
+
+
+def flaser(ranges: list[float], odom: tuple[float, float, float], stamp: str, kind: str = "FLASER") -> str:
+    x, y, th = odom
+    return (f"{kind} {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {x} {y} {th} {x} {y} {th} "
+            f"{stamp} nohost {stamp}")
+
+
+def robotlaser(ranges: list[float], laser: tuple, robot: tuple, stamp: str, start: float = -1.5, fov: float = 3.0,
+               remissions: int = 2) -> str:
+    res = fov / (len(ranges) - 1)
+    rem = " ".join(["0.5"] * remissions)
+    return (f"ROBOTLASER1 0 {start} {fov} {res} 20.0 0.01 0 {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} "
+            f"{remissions} {rem} {laser[0]} {laser[1]} {laser[2]} {robot[0]} {robot[1]} {robot[2]} "
+            f"0.1 0.0 0.5 0.3 0.0 {stamp} nohost {stamp}")
+
+
+def write(path: Path, lines: list[str]) -> Path:
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_stamps_are_exact_nanoseconds() -> None:
+    assert stamp_text_to_ns("976052857.337530") == 976052857_337530000
+    assert stamp_text_to_ns("12.5") == 12_500_000_000 and stamp_text_to_ns("7") == 7_000_000_000
+    with pytest.raises(ValueError):
+        stamp_text_to_ns("12.3e4")
+
+
+def test_carmen_beam_angles() -> None:
+    """CARMEN's own spacing: 1 degree for 180 beams (-90..+89), 0.5 for 360, else 180 degrees over the beams."""
+    assert carmen_beam_geometry(180) == pytest.approx((-math.pi / 2, math.pi / 180))
+    assert carmen_beam_geometry(361) == pytest.approx((-math.pi / 2, math.pi / 360))
+    assert carmen_beam_geometry(91) == pytest.approx((-math.pi / 2, math.pi / 90))
+
+
+def test_flaser_log_is_a_bag(tmp_path: Path) -> None:
+    """FLASER and ODOM lines, a mount PARAM, a comment, a line of another kind, stamps out of order."""
+    ranges = [1.0 + 0.01 * i for i in range(180)]
+    ranges[5] = FLASER_MAX_RANGE_M  # no return
+    log = write(tmp_path / "run.clf", [
+        "# a CARMEN log",
+        "PARAM robot_frontlaser_offset 0.12 nohost 0",
+        flaser(ranges, (0.0, 0.0, 0.0), "100.000001"),
+        "ODOM 0.05 0.0 0.0 0.1 0.0 0.0 100.100000 nohost 100.1",
+        flaser(ranges, (0.1, 0.0, 0.1), "100.200000"),
+        flaser(ranges, (0.2, 0.0, 0.2), "100.150000"),  # stamped before the line logged before it
+        "TRUEPOS 0 0 0 0 0 0 100.2 nohost 100.2",
+    ])
+    with open_bag(log) as bag:
+        assert bag.kind == "carmen"
+        assert {n: i.count for n, i in bag.topics.items()} == {"/scan": 3, "/odom": 4, "/tf": 4, "/tf_static": 1}
+        assert any("TRUEPOS" in w for w in bag.warnings)
+        records = list(bag.messages())
+    times = [r.log_time_ns for r in records]
+    assert times == sorted(times) and records[0].topic == "/tf_static"
+    scans = [r.msg for r in records if r.topic == "/scan"]
+    assert [s.header.seq for s in scans] == [0, 2, 1]  # the recording order, by seq
+    first = decode_laserscan(scans[0])
+    assert first.stamp_ns == 100_000_001_000 and first.frame_id == "laser"
+    assert first.angles_rad[0] == pytest.approx(-math.pi / 2) and first.angles_rad[-1] == pytest.approx(math.radians(89))
+    assert np.isinf(first.ranges_m[5]) and first.ranges_m[6] == pytest.approx(1.06)
+    odom = [decode_odometry(r.msg) for r in records if r.topic == "/odom"]
+    assert [o.stamp_ns for o in odom] == [100_000_001_000, 100_100_000_000, 100_150_000_000, 100_200_000_000]
+    static = decode_tf_message(records[0].msg)
+    assert static.parent == ["base_link"] and static.child == ["laser"]
+    assert static.translation[0] == pytest.approx([0.12, 0.0, 0.0])
+
+
+def test_robotlaser_geometry_and_mount_come_from_the_line(tmp_path: Path) -> None:
+    """ROBOTLASER1 says its angles and range; the mount is its laser pose against its robot pose. A log that also
+    carries FLASER lines for the same scans gives one /scan per scan."""
+    ranges = [2.0] * 31
+    ranges[0] = 25.0  # beyond its 20 m maximum
+    robot = (1.0, 2.0, math.pi / 2)
+    laser = (1.0, 2.25, math.pi / 2)  # 0.25 m ahead of the base, which faces +y
+    log = write(tmp_path / "run.log", [
+        robotlaser(ranges, laser, robot, "5.5"),
+        flaser([2.0] * 180, robot, "5.5"),
+        robotlaser(ranges, laser, robot, "5.7"),
+    ])
+    with open_bag(log) as bag:
+        assert bag.topics["/scan"].count == 2
+        records = list(bag.messages())
+    scan = decode_laserscan(next(r.msg for r in records if r.topic == "/scan"))
+    assert scan.angles_rad[0] == pytest.approx(-1.5) and scan.angles_rad[-1] == pytest.approx(1.5)
+    assert scan.range_max_m == pytest.approx(20.0) and np.isinf(scan.ranges_m[0])
+    static = decode_tf_message(next(r.msg for r in records if r.topic == "/tf_static"))
+    assert static.translation[0] == pytest.approx([0.25, 0.0, 0.0], abs=1e-9)
+
+
+def test_rear_and_raw_lasers_and_gzip(tmp_path: Path) -> None:
+    ranges = [3.0] * 180
+    raw = "RAWLASER1 0 -1.5 3.0 0.1 30.0 0.01 0 31 " + " ".join(["1.0"] * 31) + " 0 7.25 nohost 7.25"
+    lines = [flaser(ranges, (0.0, 0.0, 0.0), "7.0", kind="RLASER"), raw]
+    path = tmp_path / "run.clf.gz"
+    with gzip.open(path, "wt") as f:
+        f.write("\n".join(lines) + "\n")
+    with open_bag(path) as bag:
+        assert set(bag.topics) == {"/scan", "/scan_rear", "/odom", "/tf", "/tf_static"}
+        rear = next(r.msg for r in bag.messages(["/scan_rear"]))
+        static = decode_tf_message(next(r.msg for r in bag.messages(["/tf_static"])))
+    assert rear.header.frame_id == "rear_laser"
+    assert static.child == ["rear_laser"]
+
+
+def test_damaged_lines_are_skipped_and_said(tmp_path: Path) -> None:
+    good = flaser([1.0] * 180, (0.0, 0.0, 0.0), "1.0")
+    log = write(tmp_path / "run.clf", [good, "FLASER 180 1.0 2.0", "ODOM x y z 0 0 0 1.5 nohost 1.5",
+                                       flaser([1.0] * 180, (0.0, 0.0, 0.0), "2.0")])
+    with open_bag(log) as bag:
+        assert bag.topics["/scan"].count == 2
+        assert any("could not be read" in w and "1 FLASER" in w and "1 ODOM" in w for w in bag.warnings), bag.warnings
+
+
+@pytest.mark.parametrize("text", ["hello, these are notes\n", "FLASER oops\n"])
+def test_a_text_file_that_is_no_log_is_refused(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "notes.log"
+    path.write_text(text)
+    with pytest.raises(BagError):
+        open_bag(path)
+
+
+def test_info_reads_a_carmen_log(tmp_path: Path) -> None:
+    log = write(tmp_path / "run.clf", [flaser([1.0] * 180, (0.1 * k, 0.0, 0.0), f"{10 + k}.0") for k in range(5)])
+    result = subprocess.run([sys.executable, "-m", "bagtools", "info", str(log)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "carmen" in result.stdout and "/scan" in result.stdout and "base_link" in result.stdout
