@@ -33,6 +33,10 @@ scan, in the robot base frame:
    scan whose stamp is suspect (a step under ``SHORT_STEP_RATIO`` of the usual
    one, or the step after it) and that matches nothing well within reach is
    searched in the largest window with no reach (counted as ``beyond_reach``).
+   A scan stamped before the scan registered before it (the log stamped it out
+   of the order it was recorded in, which the scans arrive in) has a stamp
+   that says nothing of when it was taken: it is taken as the next scan of its
+   laser, one typical time step later, and is never searched beyond reach.
 4. **Refinement**: when the scene's NDT cells are large (long ranges: cells
    of 1/sqrt(2) of them are at least ``MIN_REFINE_CELL_M``), NDT refines the
    winner once more on the keyframe's submap with those finer cells, the next
@@ -380,7 +384,8 @@ class LaserOdometry:
         """Register a scan: ``points`` (voxel-filtered) are matched; ``full`` is kept and makes keyframes."""
         opts = self.options
         last = self.run.steps[-1]
-        dt = max((stamp_ns - last.stamp_ns) / 1e9, 1e-3)
+        late = stamp_ns < last.stamp_ns  # stamped before the scan registered before it, which it came after
+        dt = self._typical_step() if late else max((stamp_ns - last.stamp_ns) / 1e9, 1e-3)
         guesses = self._guesses(last.pose, dt, odom)
         kf = self._keyframe
         prior = self._prior(last.pose, dt, guesses, kf)
@@ -402,7 +407,7 @@ class LaserOdometry:
                     matches = self._search_wide(points, kf, prior, dt, matches)
                 best = max(matches, key=prior.objective)
         beyond = None
-        suspect = self._short_step(dt)
+        suspect = not late and self._short_step(dt)
         if opts.search and prior.kind != "odometry" and best.score < self._trust_score() and \
                 (suspect or self._after_short_step):  # the speed that made the guess came from a suspect stamp
             beyond = self._search_beyond_reach(points, kf, _between(kf.pose, last.pose), best)
@@ -598,6 +603,12 @@ class LaserOdometry:
                 continue
             refined.append(self._ndt(points, ndt, initial, source, prior))
         return refined
+
+    def _typical_step(self) -> float:
+        """The recent typical time step (s): that of a scan whose stamp says nothing of when it was taken (one
+        stamped before the scan recorded before it), as the next scan of its laser; STAMP_JITTER_S before any."""
+        recent = self._steps_s[-20:]
+        return float(np.median(recent)) if recent else STAMP_JITTER_S
 
     def _short_step(self, dt: float) -> bool:
         """A time step under SHORT_STEP_RATIO of the recent typical one: its stamp is suspect."""

@@ -42,10 +42,12 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    the gate. When the estimate is sure of the relative pose (``sigma_t`` at
    most ``sure_sigma_m``) that is enough. Otherwise one match proves little (a
    corridor or a symmetric room matches in several places), and the match
-   waits up to ``pending_keyframes`` keyframes for a second, from another new
-   keyframe, that is pairwise consistent with it (the cycle loop 1, old chain,
-   loop 2, new chain closes within the gate: E. Olson's single-cluster test in
-   its smallest form); both are then accepted. Unconfirmed matches are rejected.
+   waits up to ``pending_keyframes`` keyframes for a second, from a new keyframe
+   whose new map shares none of its keyframes (two matches of the same scans
+   are one piece of evidence: a look-alike fools both), that is pairwise
+   consistent with it (the cycle loop 1, old chain, loop 2, new chain closes
+   within the gate: E. Olson's single-cluster test in its smallest form); both
+   are then accepted. Unconfirmed matches are rejected.
 
 Every candidate is recorded as a :class:`LoopCandidate` with what happened to it.
 """
@@ -102,7 +104,7 @@ class LoopOptions:
     wide_spacing_m: float = 2.0
     loop_spacing_m: float = 1.0
     sure_sigma_m: float = 0.3
-    pending_keyframes: int = 10
+    pending_keyframes: int = 20
     pair_max_path_m: float = 15.0
     ndt_cell_m: float = 0.5
     max_refine_m: float = 0.3
@@ -467,7 +469,7 @@ class ConsistencyCheck:
         """Does the cycle a.old -> a.new -> b.new -> b.old -> a.old close within the gate?"""
         o = self.options
         path = self.path_m
-        if a.new == b.new:
+        if abs(a.new - b.new) <= o.new_map_keyframes:  # their new maps share keyframes: one piece of evidence
             return False
         old_gap = abs(path[a.old] - path[b.old])
         new_gap = abs(path[a.new] - path[b.new])

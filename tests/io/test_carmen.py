@@ -43,11 +43,12 @@ def test_stamps_are_exact_nanoseconds() -> None:
         stamp_text_to_ns("12.3e4")
 
 
-def test_carmen_beam_angles() -> None:
-    """CARMEN's own spacing: 1 degree for 180 beams (-90..+89), 0.5 for 360, else 180 degrees over the beams."""
-    assert carmen_beam_geometry(180) == pytest.approx((-math.pi / 2, math.pi / 180))
+def test_flaser_beams_span_the_field_of_view() -> None:
+    """180 beams from -90 to +90 degrees (180/179 apart, as the relations of the Intel log say, not CARMEN's 1
+    degree), 361 half a degree apart, 401 over the 100 degrees of that SICK mode."""
+    assert carmen_beam_geometry(180) == pytest.approx((-math.pi / 2, math.pi / 179))
     assert carmen_beam_geometry(361) == pytest.approx((-math.pi / 2, math.pi / 360))
-    assert carmen_beam_geometry(91) == pytest.approx((-math.pi / 2, math.pi / 90))
+    assert carmen_beam_geometry(401) == pytest.approx((-math.radians(50), math.radians(0.25)))
 
 
 def test_flaser_log_is_a_bag(tmp_path: Path) -> None:
@@ -74,7 +75,7 @@ def test_flaser_log_is_a_bag(tmp_path: Path) -> None:
     assert [s.header.seq for s in scans] == [0, 2, 1]  # the recording order, by seq
     first = decode_laserscan(scans[0])
     assert first.stamp_ns == 100_000_001_000 and first.frame_id == "laser"
-    assert first.angles_rad[0] == pytest.approx(-math.pi / 2) and first.angles_rad[-1] == pytest.approx(math.radians(89))
+    assert first.angles_rad[0] == pytest.approx(-math.pi / 2) and first.angles_rad[-1] == pytest.approx(math.pi / 2)
     assert np.isinf(first.ranges_m[5]) and first.ranges_m[6] == pytest.approx(1.06)
     odom = [decode_odometry(r.msg) for r in records if r.topic == "/odom"]
     assert [o.stamp_ns for o in odom] == [100_000_001_000, 100_100_000_000, 100_150_000_000, 100_200_000_000]

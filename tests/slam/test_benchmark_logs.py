@@ -64,8 +64,7 @@ def test_intel_holds_where_scans_and_odometry_are_stamped_out_of_order(intel_hea
 @pytest.fixture(scope="module")
 def intel_head_carmen(intel_head: Path) -> Path:
     """The same 2500 scans as the CARMEN log they came from: FLASER lines in the order the robot recorded them,
-    each with its odometry pose and its stamp to the microsecond. Read back, the beams take CARMEN's own
-    spacing (1 degree from -90), not the bag's (180/179 degrees)."""
+    each with its odometry pose and its stamp to the microsecond; read back, the beams span 180 degrees."""
     scans, odom = [], []
     with open_bag(intel_head) as bag:
         for rec in bag.messages(["/scan", "/odom"]):
@@ -92,7 +91,7 @@ def intel_head_carmen(intel_head: Path) -> Path:
 
 @pytest.mark.parametrize("use_odometry", [False, True])
 def test_intel_holds_read_from_its_carmen_log(intel_head_carmen: Path, use_odometry: bool) -> None:
-    """The benchmark's own format, read natively (CARMEN's beam angles, odometry from the laser lines)."""
+    """The benchmark's own format, read natively (odometry from the laser lines, the beams spanning 180 degrees)."""
     options = SlamOptions(use_odometry=use_odometry, relations=str(BENCHMARK_DIR / "intel.relations"))
     summary = SlamPipeline(intel_head_carmen, options).run().summary
     assert summary["scans"] == FIRST_SCANS

@@ -99,9 +99,13 @@ def test_consistency_check() -> None:
     assert check.review(first, poses) == [] and first.status == PENDING
     aliased = _cand(5, 25, np.array([0.9, 0.0, 0.0]), same, (0.6, 0.1))  # a look-alike 0.9 m further on
     assert check.review(aliased, poses) == [] and aliased.status == PENDING
-    second = _cand(6, 26, same, same, (0.6, 0.1))
+    # a match whose new map shares keyframes with the first's (new_map_keyframes = 4) repeats the same evidence
+    overlapping = _cand(6, 26, same, same, (0.6, 0.1))
+    assert check.review(overlapping, poses) == [] and overlapping.status == PENDING
+    second = _cand(9, 29, same, same, (0.6, 0.1))  # its new map (25..29) shares none with the first's (20..24)
     assert set(map(id, check.review(second, poses))) == {id(second), id(first)}
-    assert aliased.status == PENDING and check.expire(newest=40) == [aliased] and aliased.status == UNCONFIRMED
+    assert aliased.status == PENDING and check.expire(newest=50) == [aliased, overlapping]
+    assert aliased.status == UNCONFIRMED
 
 
 @pytest.mark.parametrize("field,value", [("search_radius_m", 0.0), ("min_score", 1.5), ("max_candidates", 0),
