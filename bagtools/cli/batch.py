@@ -6,6 +6,8 @@ import time
 
 import click
 
+from bagtools.errors import BagtoolsError
+
 _COMMAND_ARGS = "bagtools.batch.command_args"
 _OUT_PLACEHOLDER = "<batch --out>"
 _MAX_FAILURES_SHOWN = 20
@@ -27,7 +29,10 @@ def _command_params(command: str, args: list[str]) -> dict:
     from bagtools.batch import get_job
     from bagtools.cli import COMMANDS, cli
 
-    get_job(command, set(COMMANDS))  # an unknown or unbatchable command is refused first
+    try:  # an unknown or unbatchable command is refused first, as a problem of the command line, not of a bag
+        get_job(command, set(COMMANDS))
+    except BagtoolsError as err:
+        raise click.BadParameter(err.problem, param_hint="COMMAND") from err
     group_ctx = click.get_current_context().find_root()
     sub = cli.get_command(group_ctx, command)
     takes_out = any(p.name == "out_dir" for p in sub.params)

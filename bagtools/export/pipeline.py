@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from bagtools.errors import BagtoolsError, TopicError
 from bagtools.export.sinks import FORMATS, close_quietly, open_sink
-from bagtools.export.tables import ROWS
+from bagtools.export.tables import ROWS, message_rows, pointcloud2_rows
 from bagtools.io import open_bag
 from bagtools.outputs import atomic_path, check_writable
 from bagtools.progress import progress
@@ -35,11 +36,13 @@ def output_format(out: str | Path) -> str:
     return fmt
 
 
-def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool = False) -> ExportSummary:
-    """Write every message of ``topic`` as rows into ``out`` (format by suffix), atomically.
+def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool = False,
+                 keep_nan: bool = False) -> ExportSummary:
+    """Write every message of ``topic`` as rows into ``out`` (format by suffix), atomically. ``keep_nan``: keep a
+    PointCloud2's points with a non-finite coordinate (dropped by default).
 
-    Refuses an existing ``out`` without ``force``, a topic the bag lacks and a
-    message type with no table (see :mod:`bagtools.export.tables`), before any work.
+    Refuses an existing ``out`` without ``force`` and a topic the bag lacks or that has no message, before any
+    work. Every message type is read (see :mod:`bagtools.export.tables`).
     """
     out = Path(out)
     check_writable(out, force, inputs=[bag_path])
@@ -49,10 +52,9 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
         if info.count == 0:
             raise TopicError(f"topic '{topic}' ({info.msgtype}) has no messages, so there is nothing to export",
                              bag.path)
-        rows_of = ROWS.get(info.msgtype)
-        if rows_of is None:
-            kinds = "LaserScan, PointCloud2, Odometry, TF (TFMessage) and PointStamped"
-            raise TopicError(f"topic '{topic}' has type {info.msgtype}; export reads {kinds}", bag.path)
+        rows_of = ROWS.get(info.msgtype, message_rows)  # any other type: flattened from its definition
+        if rows_of is pointcloud2_rows:
+            rows_of = partial(pointcloud2_rows, keep_nan=keep_nan)
         summary = ExportSummary(out, fmt, info.msgtype)
         with atomic_path(out, force, inputs=[bag_path]) as staged:
             sink = open_sink(staged, fmt)

@@ -187,7 +187,9 @@ def _arrow_column(parts: list[np.ndarray]):
 
 
 class NpzSink:
-    """NPZ (numpy), one array per column, loadable without pickle; built in memory, written at the end."""
+    """NPZ (numpy, compressed), one array per column, loadable without pickle; built in memory, written at the end.
+    A text column whose values repeat is stored once: ``NAME`` holds each row's index into ``NAME.values``
+    (``npz["frame_id.values"][npz["frame_id"]]`` gives the column back)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -199,9 +201,18 @@ class NpzSink:
             self._parts.setdefault(name, []).append(column)
 
     def close(self) -> None:
-        arrays = {name: _numpy_column(parts) for name, parts in self._parts.items()}
+        arrays: dict[str, np.ndarray] = {}
+        for name, parts in self._parts.items():
+            column = _numpy_column(parts)
+            if column.dtype.kind == "U" and column.size:  # text: each distinct value once, rows index them
+                values, index = np.unique(column, return_inverse=True)
+                if values.size <= column.size // 2:
+                    arrays[name] = index.astype(np.int32 if values.size > 32_767 else np.int16)
+                    arrays[f"{name}.values"] = values
+                    continue
+            arrays[name] = column
         with open(self.path, "wb") as f:
-            np.savez(f, **arrays)
+            np.savez_compressed(f, **arrays)
 
 
 def _numpy_column(parts: list[np.ndarray]) -> np.ndarray:

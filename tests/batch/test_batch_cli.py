@@ -43,6 +43,14 @@ def test_help_has_an_example(capsys) -> None:
     assert "--scheduler" in out and "--workers" in out
 
 
+def test_a_command_batch_cannot_run_is_the_command_lines_fault_not_the_bags(fleet: Fleet, tmp_path: Path,
+                                                                            capsys) -> None:
+    code, _, err = _batch(["export", str(fleet.good[0]), "--out", str(tmp_path / "out"), "--", "/scan"], capsys)
+    assert code == 2 and err.strip() == ("bagtools: invalid value for COMMAND: 'export' is not a command batch can "
+                                         "run (choose from grid, info, map-cloud, ndt-odom, slam) (see 'bagtools "
+                                         "batch --help')"), err
+
+
 @pytest.mark.parametrize("args, problem", [
     (["tf", "{bag}"], "'tf' is not a command batch can run (choose from grid, info, map-cloud, ndt-odom, slam)"),
     (["grid", "{bag}", "--", "--resolution", "abc"], "'abc' is not a valid float (see 'bagtools grid --help')"),
