@@ -30,7 +30,7 @@ def write_cloud_map(result: CloudMapResult, out_dir: str | Path, force: bool = F
                        title=f"{result.summary.get('topic', '')} in {frame}")
         (staged / "summary.json").write_text(json.dumps(result.summary, indent=2))
         if mcap:
-            with ResultsBag(staged / RESULTS_MCAP) as bag:
+            with ResultsBag(staged / RESULTS_MCAP, namespace="map_cloud") as bag:
                 write_cloud_map_results(bag, result)
             written.append(RESULTS_MCAP)
     return [Path(out_dir) / name for name in written]

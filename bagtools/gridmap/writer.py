@@ -29,7 +29,7 @@ def write_grid_map(result: GridMapResult, out_dir: str | Path, force: bool = Fal
         (staged / "map.png").write_bytes(render_map_png(result.grid, result.scan_path_xy, title=title))
         (staged / "summary.json").write_text(json.dumps(result.summary, indent=2))
         if mcap:
-            with ResultsBag(staged / RESULTS_MCAP) as bag:
+            with ResultsBag(staged / RESULTS_MCAP, namespace="grid") as bag:
                 write_grid_map_results(bag, result)
             written.append(RESULTS_MCAP)
     return [Path(out_dir) / name for name in written]

@@ -43,7 +43,7 @@ def write_ndt_odom(result: NdtOdomResult, out_dir: str | Path, force: bool = Fal
                                 result.trajectory.positions[:, :2])
             written += ["trajectory.png", "scan_map.png"]
             if mcap:
-                with ResultsBag(staged / RESULTS_MCAP) as bag:
+                with ResultsBag(staged / RESULTS_MCAP, namespace="ndt_odom") as bag:
                     write_ndt_odom_results(bag, result)
                 written.append(RESULTS_MCAP)
         (staged / "summary.json").write_text(json.dumps(result.summary, indent=2) + "\n")

@@ -118,9 +118,14 @@ class ResultsBag:
         ros_distro: whose message definitions to embed and name ('humble' or 'jazzy'; the types used
             here are the same in both).
         start_ns: when the latched messages are stamped; default the earliest timed stamp.
+        namespace: the frames the results move (the robot's base and sensors, and the scans and clouds in
+            them) are published as ``NAMESPACE/frame``: opened or played beside the recording, whose tf has
+            the same frames under other parents (``map -> odom -> base_footprint`` against the estimate's
+            ``map -> base_footprint``), no frame has two parents. The roots (``map``, ``odom``) keep their names.
     """
 
-    def __init__(self, path: str | Path, ros_distro: str = "humble", start_ns: int | None = None) -> None:
+    def __init__(self, path: str | Path, ros_distro: str = "humble", start_ns: int | None = None,
+                 namespace: str | None = None) -> None:
         if ros_distro not in _STORES:
             raise BagtoolsError(f"unknown ROS distro {ros_distro!r} (choose from {', '.join(_STORES)})")
         self.file = Path(path)
@@ -131,6 +136,11 @@ class ResultsBag:
         self._entries: list[_Entry] = []
         self._topics: dict[str, tuple[str, Qos]] = {}
         self.counts: dict[str, int] = {}
+        self.namespace = namespace.strip("/") if namespace else None
+
+    def own(self, frame: str) -> str:
+        """The name ``frame`` is published under when the results move it (see ``namespace``)."""
+        return f"{self.namespace}/{frame}" if self.namespace and frame else frame
 
     # -- context -----------------------------------------------------------------
 
@@ -195,14 +205,17 @@ class ResultsBag:
 
     def clouds(self, topic: str,
                clouds: Iterable[tuple[int, str, np.ndarray, np.ndarray | None, np.ndarray | None]]) -> None:
-        """PointCloud2 messages at their stamps: (stamp_ns, frame_id, points (N,3), intensity (N,) or None, rgb (N,3) or None)."""
+        """PointCloud2 messages at their stamps: (stamp_ns, frame_id, points (N,3), intensity (N,) or None, rgb (N,3) or
+        None), in their sensor's frame (``own``: namespaced)."""
         for stamp_ns, frame, points, intensity, rgb in clouds:
+            frame = self.own(frame)
             fields, data, n = self._cloud_data(points, intensity, rgb)
             self._add(topic, "sensor_msgs/msg/PointCloud2", STREAM_QOS, int(stamp_ns),
                       lambda _s, st=int(stamp_ns), f=frame, fl=fields, d=data, k=n: self._cloud_msg(st, f, fl, d, k))
 
     def scans(self, topic: str, scans: Iterable[LaserScanArrays]) -> None:
-        """sensor_msgs/LaserScan messages at their header stamps, in their own frames, as decoded."""
+        """sensor_msgs/LaserScan messages at their header stamps, in their own frames (``own``: namespaced), as
+        decoded."""
         for scan in scans:
             self._add(topic, "sensor_msgs/msg/LaserScan", STREAM_QOS, int(scan.stamp_ns),
                       lambda _s, sc=scan: self._scan_msg(sc))
@@ -231,7 +244,8 @@ class ResultsBag:
     def robot(self, frame: str, base_frame: str | None, stamps_ns: np.ndarray, T_frame_base: np.ndarray,
               sensors: dict[str, np.ndarray] | None = None) -> None:
         """The robot's frames: ``frame`` -> ``base_frame`` on /tf at each stamp, and each sensor frame under the
-        base on /tf_static (``sensors``: frame id -> T_base_sensor (4,4); the base itself is skipped).
+        base on /tf_static (``sensors``: frame id -> T_base_sensor (4,4); the base itself is skipped); the base
+        and sensors namespaced (``own``).
 
         With ``base_frame`` None the single sensor frame hangs from ``frame`` directly: pass
         T_frame_sensor as ``T_frame_base`` and ``sensors={sensor_frame: identity}``.
@@ -241,10 +255,11 @@ class ResultsBag:
             if len(sensors) != 1:
                 raise ValueError("without a base frame, give exactly one sensor frame")
             (sensor, T_base_sensor), = sensors.items()
-            self.tf(frame, sensor, stamps_ns, _as_tforms(T_frame_base) @ _as_tforms(T_base_sensor)[0])
+            self.tf(frame, self.own(sensor), stamps_ns, _as_tforms(T_frame_base) @ _as_tforms(T_base_sensor)[0])
             return
-        self.tf(frame, base_frame, stamps_ns, T_frame_base)
-        self.tf_static([(base_frame, sensor, T) for sensor, T in sensors.items() if sensor and sensor != base_frame])
+        self.tf(frame, self.own(base_frame), stamps_ns, T_frame_base)
+        self.tf_static([(self.own(base_frame), self.own(sensor), T) for sensor, T in sensors.items()
+                        if sensor and sensor != base_frame])
 
     def markers(self, topic: str, frame: str, markers: Sequence[Markers], stamp_ns: int | None = None) -> None:
         """visualization_msgs/MarkerArray of ``markers`` in ``frame``, latched (at ``stamp_ns`` if given, else at the start)."""
@@ -362,7 +377,7 @@ class ResultsBag:
         angle_min = float(angles[0]) if angles.size else 0.0
         angle_max = float(angles[-1]) if angles.size else 0.0
         return self.types["sensor_msgs/msg/LaserScan"](
-            header=self._header(scan.stamp_ns, scan.frame_id), angle_min=angle_min, angle_max=angle_max,
+            header=self._header(scan.stamp_ns, self.own(scan.frame_id)), angle_min=angle_min, angle_max=angle_max,
             angle_increment=float(scan.angle_increment_rad), time_increment=float(scan.time_increment_s),
             scan_time=float(scan.scan_time_s), range_min=float(scan.range_min_m),
             range_max=float(scan.range_max_m) if math.isfinite(scan.range_max_m) else 0.0,

@@ -46,7 +46,7 @@ def write_slam(result: SlamResult, out_dir: str | Path, force: bool = False, mca
         (staged / "summary.json").write_text(json.dumps(s, indent=2) + "\n")
         written += ["pose_graph.g2o", "map.pgm", "map.yaml", "map.png", "summary.json"]
         if mcap:
-            with ResultsBag(staged / RESULTS_MCAP) as bag:
+            with ResultsBag(staged / RESULTS_MCAP, namespace="slam") as bag:
                 write_slam_results(bag, result)
             written.append(RESULTS_MCAP)
     return [Path(out_dir) / name for name in written]

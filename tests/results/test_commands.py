@@ -63,10 +63,10 @@ def test_map_cloud_results_put_each_cloud_on_the_map(tmp_path: Path) -> None:
     (_, cloud_map), = msgs["/cloud_map"]
     assert cloud_map.header.frame_id == "map"
     dynamic, static = _tf_tables(msgs)
-    assert static["camera_depth_optical_frame"][0] == "base_footprint"
+    assert static["map_cloud/camera_depth_optical_frame"][0] == "map_cloud/base_footprint"
     landed = []
     for _, cloud in msgs["/camera/depth/points"]:
-        assert cloud.header.frame_id == "camera_depth_optical_frame"
+        assert cloud.header.frame_id == "map_cloud/camera_depth_optical_frame"
         T = _chain("map", cloud.header.frame_id, _ns(cloud.header.stamp), dynamic, static)
         landed.append(_cloud_xyz(cloud) @ T[:3, :3].T + T[:3, 3])
     landed = np.concatenate(landed)
@@ -93,8 +93,10 @@ def test_grid_results_map_is_what_map_server_loads(tmp_path: Path) -> None:
     scans = msgs["/scan"]
     assert len(scans) == result.summary["scans_used"] == len(msgs["/tf"])
     dynamic, static = _tf_tables(msgs)
-    assert static["base_scan"][0] == "base_footprint"
-    positions = np.array([_chain("map", "base_scan", _ns(s.header.stamp), dynamic, static)[:2, 3] for _, s in scans])
+    assert static["grid/base_scan"][0] == "grid/base_footprint"
+    assert {s.header.frame_id for _, s in scans} == {"grid/base_scan"}
+    positions = np.array([_chain("map", "grid/base_scan", _ns(s.header.stamp), dynamic, static)[:2, 3]
+                          for _, s in scans])
     assert np.allclose(positions, result.scan_path_xy, atol=1e-9)  # each scan where the grid inserted it
 
 
@@ -113,7 +115,7 @@ def test_ndt_odom_results_hold_the_trajectories(tmp_path: Path) -> None:
     assert np.allclose(xy, tum.positions[:, :2], atol=1e-8)
     dynamic, static = _tf_tables(msgs)
     stamp = _ns(msgs["/scan"][50][1].header.stamp)
-    assert np.allclose(_chain("odom", "base_footprint", stamp, dynamic, static), result.trajectory.poses[50])
+    assert np.allclose(_chain("odom", "ndt_odom/base_footprint", stamp, dynamic, static), result.trajectory.poses[50])
     assert len(msgs["/ground_truth"][0][1].poses) > 0 and msgs["/cloud_map"][0][1].width > 300
 
 
@@ -127,3 +129,24 @@ def test_no_mcap_skips_it_and_removes_an_old_one_with_force(tmp_path: Path) -> N
     forced = subprocess.run(run + ["--no-mcap", "--force"], capture_output=True, text=True, timeout=300)
     assert forced.returncode == 0, forced.stderr
     assert not (out / "results.mcap").exists() and (out / "map.yaml").is_file()
+
+
+@pytest.mark.parametrize("command", ["grid", "map-cloud", "ndt-odom", "slam"])
+def test_results_beside_their_bag_give_no_frame_two_parents(command: str, tmp_path: Path) -> None:
+    """The bag and its results.mcap read as one stream (as Foxglove shows them, as `ros2 bag play` plays them):
+    every frame has one parent. The estimates' frames are namespaced; the roots (map, odom) are shared."""
+    from rosbags.highlevel import AnyReader
+
+    out = tmp_path / command
+    done = subprocess.run([sys.executable, "-m", "bagtools", command, str(FIXTURE), "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    bag = FIXTURE / next(p.name for p in FIXTURE.iterdir() if p.suffix == ".mcap")
+    parents: dict[str, set[str]] = {}
+    with AnyReader([bag, out / "results.mcap"]) as reader:
+        conns = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]
+        for conn, _, raw in reader.messages(connections=conns):
+            for ts in reader.deserialize(raw, conn.msgtype).transforms:
+                parents.setdefault(ts.child_frame_id, set()).add(ts.header.frame_id)
+    assert {f for f in parents if f.startswith(f"{command.replace('-', '_')}/")}, parents  # the results' own frames
+    assert {f: p for f, p in parents.items() if len(p) > 1} == {}
