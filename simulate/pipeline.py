@@ -47,7 +47,10 @@ LATENCY_MS = {"tf": (1, 5), "odom": (1, 5), "truth": (1, 5), "scan": (10, 30), "
 WORLD_TOPIC = "/simulation/world"
 CLOUD_TOPIC = "/camera/depth/points"
 CAMERA_INFO_TOPIC = "/camera/depth/camera_info"
-CLOUD_FRAME = "camera_depth_optical_frame"  # as Gazebo's depth plugin publishes the R200's cloud
+#: The frames the depth cloud may be published in (and seen from). The default is the lab's: the TurtleBot3
+#: Waffle's Gazebo depth plugin publishes its points in camera_rgb_optical_frame; the R200's own depth optical
+#: frame, 1 cm beside it, is the other.
+CLOUD_FRAMES = ("camera_rgb_optical_frame", "camera_depth_optical_frame")
 IMU_FRAME = "imu_link"
 BATCH_BLOCK = 4096  # messages serialized at once per fixed-layout stream (bounds memory on long runs)
 
@@ -65,6 +68,7 @@ class SimConfig:
     cloud: bool = True
     cloud_rate_hz: float = 2.0
     cloud_size: tuple[int, int] = (160, 120)
+    cloud_frame: str = CLOUD_FRAMES[0]
     ros_distro: str = DEFAULT_ROS_DISTRO  # humble: metadata version 5, which Humble and Jazzy both read
     world: str = "turtlebot3_world"
     start_time_ns: int = 1_700_000_000_000_000_000
@@ -85,6 +89,8 @@ class SimConfig:
         w, h = self.cloud_size
         if w < 2 or h < 2 or w * h > MAX_CLOUD_PIXELS:
             raise BagtoolsError(f"--cloud-size must be at least 2x2 and at most {MAX_CLOUD_PIXELS} pixels, got {w}x{h}")
+        if self.cloud_frame not in CLOUD_FRAMES:
+            raise BagtoolsError(f"unknown cloud frame {self.cloud_frame!r} (choose from {', '.join(CLOUD_FRAMES)})")
         if self.ros_distro not in ROS_DISTROS:
             raise BagtoolsError(f"unknown ROS distro {self.ros_distro!r} (choose from {', '.join(ROS_DISTROS)})")
 
@@ -183,7 +189,7 @@ class _BagSimulation:
             cloud_ns = self.t0 + np.round(np.arange(n_clouds) * 1e9 / config.cloud_rate_hz).astype(np.int64)
             self.cloud_ns = cloud_ns[cloud_ns <= step_ns[-1]]
             self.cloud_poses = motion.pose_at_offset((self.cloud_ns - self.t0) / 1e9)
-            self.T_base_optical = T_base_footprint_frame(CLOUD_FRAME)
+            self.T_base_optical = T_base_footprint_frame(config.cloud_frame)
         n_clicks = int(config.duration_s // CLICK_PERIOD_S)
         self.click_ns = self.t0 + np.arange(1, n_clicks + 1, dtype=np.int64) * int(CLICK_PERIOD_S * 1e9)
         self.click_points = _clicked_points(world, motion.pose_at_offset((self.click_ns - self.t0) / 1e9), rngs["click"])
@@ -290,10 +296,11 @@ class _BagSimulation:
         if name == "cloud":
             T_map_optical = pose2tform(self.cloud_poses[j]) @ self.T_base_optical
             points = self.camera.points(self.world, T_map_optical, self.rngs["cloud"])
-            return CLOUD_TOPIC, mb.point_cloud(int(self.cloud_ns[j]), CLOUD_FRAME, points)
+            return CLOUD_TOPIC, mb.point_cloud(int(self.cloud_ns[j]), self.config.cloud_frame, points)
         if name == "camera_info":
             cam = self.camera
-            return CAMERA_INFO_TOPIC, mb.camera_info(int(self.cloud_ns[j]), CLOUD_FRAME, cam.width, cam.height, cam.K, cam.P)
+            return CAMERA_INFO_TOPIC, mb.camera_info(int(self.cloud_ns[j]), self.config.cloud_frame, cam.width, cam.height,
+                                                     cam.K, cam.P)
         if name == "click":
             return "/clicked_point", mb.point_stamped(int(self.click_ns[j]), "map", self.click_points[j])
         raise ValueError(f"unknown stream {name!r}")

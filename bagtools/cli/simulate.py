@@ -18,13 +18,17 @@ import click
 @click.option("--cloud-rate", type=float, default=2.0, show_default=True, help="Depth cloud rate [Hz].")
 @click.option("--cloud-size", default="160x120", show_default=True, help="Depth image size WIDTHxHEIGHT.")
 @click.option("--no-cloud", is_flag=True, help="Do not simulate the depth camera.")
+@click.option("--cloud-frame", type=click.Choice(["camera_rgb_optical_frame", "camera_depth_optical_frame"]),
+              default="camera_rgb_optical_frame", show_default=True,
+              help="Frame of the depth cloud (the Waffle's Gazebo plugin, and the lab, use camera_rgb_optical_frame).")
 @click.option("--ros-distro", type=click.Choice(["humble", "jazzy"]), default="humble", show_default=True,
               help="Write the bag as this distro's rosbag2 does. humble: metadata version 5, which Humble and "
                    "Jazzy both read; jazzy: version 9 as Jazzy writes it, which Humble cannot open.")
 @click.option("--world", default="turtlebot3_world", show_default=True, help="Packaged world name or a world JSON file.")
 @click.option("--force", is_flag=True, help="Overwrite OUT if it exists.")
 def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, max_linear: float, max_angular: float,
-             cloud_rate: float, cloud_size: str, no_cloud: bool, ros_distro: str, world: str, force: bool) -> None:
+             cloud_rate: float, cloud_size: str, no_cloud: bool, cloud_frame: str, ros_distro: str, world: str,
+             force: bool) -> None:
     """Simulate a TurtleBot3 Waffle and write the rosbag2 (MCAP) directory OUT.
 
     Topics: /tf, /tf_static, /robot_description, /joint_states, /odom, /imu, /scan,
@@ -44,6 +48,7 @@ def simulate(out: str, duration: float, seed: int, route: str, odom_noise: str, 
 
     config = SimConfig(duration_s=duration, seed=seed, route=route, odom_noise=odom_noise, max_linear_mps=max_linear,
                        max_angular_radps=max_angular, cloud=not no_cloud, cloud_rate_hz=cloud_rate,
-                       cloud_size=parse_cloud_size(cloud_size), ros_distro=ros_distro, world=world)
+                       cloud_size=parse_cloud_size(cloud_size), cloud_frame=cloud_frame, ros_distro=ros_distro,
+                       world=world)
     summary = simulate_bag(out, config, force)
     click.echo("\n".join(summary.lines()))

@@ -7,8 +7,10 @@ the ``pointCloudCutoff`` set in ``turtlebot3_waffle.gazebo.xacro`` and the
 depth plugin's default ``pointCloudCutoffMax``. Image size is the caller's
 choice (the model renders 1920x1080; 160x120 keeps bags small).
 
-The cloud is published in ``camera_depth_optical_frame`` (the R200's depth optical
-frame in ROBOTIS' URDF) with its intrinsics on ``/camera/depth/camera_info`` (``K``, ``P``).
+The cloud is published in ``camera_rgb_optical_frame``, as the Waffle's Gazebo depth
+plugin publishes it (or, asked for, ``camera_depth_optical_frame``, the R200's depth
+optical frame in ROBOTIS' URDF), seen from that frame, with its intrinsics on
+``/camera/depth/camera_info`` (``K``, ``P``).
 
 Geometry is Gazebo's: a pinhole with square pixels, focal length
 ``f = width / (2 tan(hfov / 2))`` pixels and principal point at the image
@@ -101,7 +103,7 @@ class DepthCamera:
 
         Args:
             world: the world to look at.
-            T_map_optical: (4, 4) pose of the optical frame (camera_depth_optical_frame) in the map.
+            T_map_optical: (4, 4) pose of the optical frame (the cloud's frame) in the map.
             rng: noise source; ``None`` gives exact depths. Each call draws
                 exactly H*W normals when noise is on.
         """
@@ -128,7 +130,7 @@ class DepthCamera:
 
         Args:
             world: the world to look at.
-            T_map_optical: (4, 4) pose of the optical frame (camera_depth_optical_frame)
+            T_map_optical: (4, 4) pose of the optical frame (the cloud's frame)
                 in the map (maps optical-frame points into the map).
             rng: noise source; ``None`` gives exact points.
         """

@@ -24,10 +24,11 @@ BEFORE = {
 @pytest.mark.parametrize("case", list(BEFORE))
 def test_cloud_map_accuracy_against_the_true_world_is_unchanged(tmp_path, case):
     if case == "default_map":
-        bag = simulate_bag(tmp_path / "bag", SimConfig(duration_s=30.0)).path
+        bag = simulate_bag(tmp_path / "bag", SimConfig(duration_s=30.0, cloud_frame="camera_depth_optical_frame")).path
         options = CloudMapOptions(sample=0.2)
     else:
-        config = SimConfig(duration_s=30.0, route="figure8", odom_noise="none", cloud_size=(80, 60), cloud_rate_hz=5.0)
+        config = SimConfig(duration_s=30.0, route="figure8", odom_noise="none", cloud_size=(80, 60), cloud_rate_hz=5.0,
+                           cloud_frame="camera_depth_optical_frame")
         bag = simulate_bag(tmp_path / "bag", config).path
         options = CloudMapOptions(sample=0.2, frame="odom")
     summary = CloudMapPipeline(bag, options).run().summary

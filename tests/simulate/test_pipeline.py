@@ -144,13 +144,13 @@ def test_scans_agree_with_exact_ray_distances(msgs, world):
 
 
 def test_clouds_land_on_true_surfaces(msgs, world):
-    T_base_opt = T_base_footprint_frame("camera_depth_optical_frame")
+    T_base_opt = T_base_footprint_frame("camera_rgb_optical_frame")  # the lab's frame, the Waffle plugin's
     poses = sorted(truth_by_stamp(msgs).items())
     t_truth = np.array([t for t, _ in poses])
     xyyaw = np.array([p for _, p in poses])
     dists = []
     for _, cloud, _ in msgs["/camera/depth/points"]:
-        assert cloud.header.frame_id == "camera_depth_optical_frame" and not cloud.is_dense
+        assert cloud.header.frame_id == "camera_rgb_optical_frame" and not cloud.is_dense
         assert (cloud.point_step, cloud.row_step, cloud.height, cloud.width) == (12, 12 * 40, 30, 40)
         pts = np.frombuffer(cloud.data, dtype="<f4").reshape(-1, 3).astype(np.float64)
         pts = pts[np.isfinite(pts).all(axis=1)]
@@ -338,7 +338,7 @@ def test_camera_info_matches_the_depth_camera(msgs):
     clouds = [m for _, m, _ in msgs["/camera/depth/points"]]
     assert [stamp_ns(i) for i in infos] == [stamp_ns(c) for c in clouds]
     info = infos[0]
-    assert info.header.frame_id == clouds[0].header.frame_id == "camera_depth_optical_frame"
+    assert info.header.frame_id == clouds[0].header.frame_id == "camera_rgb_optical_frame"
     assert (info.width, info.height, info.distortion_model) == (40, 30, "plumb_bob")
     np.testing.assert_allclose(info.k, camera.K.ravel())
     np.testing.assert_allclose(info.p, camera.P.ravel())
