@@ -1,8 +1,25 @@
-"""bagtools: tools over recorded ROS bags (MCAP, rosbag2 sqlite3, ROS 1).
+"""bagtools: tools over recorded ROS bags (MCAP, rosbag2 sqlite3, ROS 1) and CARMEN logs.
 
-Subpackages: ``io`` (reading and decoding bags), ``transforms`` (MATLAB-style
-rotation and transform representations), ``tf`` (time-indexed tf buffer with
-tf2 semantics), ``cli`` (the click shell around the library).
+The layers, bottom up (nothing imports upward):
+
+- ``io``: one reader over every bag format (``open_bag``), CARMEN logs included, and decoders to numpy arrays;
+- ``transforms``: MATLAB-style rotations and transforms (quaternions [w x y z]);
+- ``tf``: a time-indexed tf buffer with tf2's semantics (``TfBuffer``), repairs and ``tf echo``;
+- ``dataset``: the streams the algorithms read (scans in recording order, odometry);
+- ``trajectory``: trajectories, TUM files, evo's APE/RPE and the benchmarks' relations metric;
+- ``ndt``: 2D NDT and correlative (branch and bound) scan matching;
+- ``grid``: log-odds occupancy grids and ray casting;
+- ``gridmap``, ``cloudmap``: maps from known poses (``grid``, ``map-cloud``);
+- ``ndtodom``: laser odometry (``ndt-odom``), the front end of SLAM;
+- ``slam``: loop closure, the GTSAM pose graph, the SLAM pipeline and ``eval``;
+- ``results``: results.mcap writers (to open beside the bag in Foxglove);
+- ``export``: any topic to CSV, NPZ or Parquet;
+- ``batch``: many bags through one command on a Dask cluster;
+- ``cli``: the thin click shell (``bagtools --help``).
+
+Modules: ``baginfo`` (``bagtools info``), ``outputs`` (atomic writes, --force, staging), ``errors``, ``limits``
+(memory budget), ``progress``, ``figures``, ``simtruth`` (a bag's /ground_truth). The simulator installs as
+``bagtools_simulate``.
 """
 
 __version__ = "0.1.0"

@@ -48,16 +48,19 @@ class LazyGroup(click.Group):
         return getattr(importlib.import_module(module_name), attr)
 
 
-@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]}, invoke_without_command=True)
 @click.version_option(__version__, prog_name="bagtools")
-def cli() -> None:
-    """Tools over recorded ROS bags (MCAP, rosbag2 sqlite3, ROS 1).
+@click.pass_context
+def cli(ctx: click.Context) -> None:
+    """Tools over recorded ROS bags (MCAP, rosbag2 sqlite3, ROS 1) and CARMEN logs.
 
     \b
     Example:
       bagtools simulate out/sim --duration 60
       bagtools info out/sim
     """
+    if ctx.invoked_subcommand is None:  # `bagtools` alone: the help, as git and ros2 print theirs
+        click.echo(ctx.get_help())
 
 
 def _input_name(argv: list[str]) -> str | None:
@@ -77,7 +80,8 @@ def _usage_line(exc: click.UsageError, argv: list[str]) -> str:
     problem = " ".join(exc.format_message().split()).rstrip(".")
     if problem:
         problem = problem[0].lower() + problem[1:]
-    subject = _input_name(argv)
+    command_line = isinstance(exc, click.BadParameter) and exc.param_hint == "COMMAND"  # no file is at fault
+    subject = None if command_line else _input_name(argv)
     prefix = f"{subject}: " if subject else ""
     return f"bagtools: {prefix}{problem} (see '{command} --help')"
 

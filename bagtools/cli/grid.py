@@ -6,13 +6,14 @@ import json
 
 import click
 
+from bagtools.cli.complete import complete_topics
 from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 
 
 @click.command("grid")
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
-@click.option("--topic", default="/scan", show_default=True, help="LaserScan topic.")
+@click.option("--topic", default="/scan", shell_complete=complete_topics, show_default=True, help="LaserScan topic.")
 @click.option("--poses", default="tf", show_default=True, metavar="tf|ground-truth|TRAJ.tum",
               help="Scan poses: the bag's tf, the simulator's /ground_truth, or a TUM trajectory of the robot base "
                    "in --frame (e.g. bagtools ndt-odom's trajectory.tum).")
@@ -60,7 +61,7 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     write_grid_map(result, out_dir, force, mcap=not no_mcap)
     s, g = result.summary, result.summary["grid"]
     click.echo(f"{s['scans_used']} of {s['scans_total']} scans mapped, skipped {json.dumps(s['scans_skipped'])}; "
-               f"{g['rows']}x{g['cols']} cells of {g['cell_size_m']:g} m in {out_dir}/map.yaml")
+               f"{g['cols']}x{g['rows']} cells (width x height) of {g['cell_size_m']:g} m in {out_dir}/map.yaml")
     if "accuracy_vs_truth" in s:
         a = {k: ("n/a" if v is None else f"{v:.3f}") for k, v in s["accuracy_vs_truth"].items()
              if k in ("occupied_precision", "occupied_recall", "free_share")}

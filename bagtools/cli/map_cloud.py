@@ -6,11 +6,13 @@ import json
 
 import click
 
+from bagtools.cli.complete import complete_topics
+
 
 @click.command("map-cloud")
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
-@click.option("--topic", default="/camera/depth/points", show_default=True, help="PointCloud2 or LaserScan topic.")
+@click.option("--topic", default="/camera/depth/points", shell_complete=complete_topics, show_default=True, help="PointCloud2 or LaserScan topic.")
 @click.option("--frame", default="map", show_default=True, help="Fixed frame to build the map in.")
 @click.option("--stamp", type=click.Choice(["message", "latest"]), default="message", show_default=True,
               help="Pose at each message's header stamp, or the newest tf available when it arrived.")

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import click
 
+from bagtools.cli.complete import complete_topics
 from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 
 
 @click.command("ndt-odom")
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
-@click.option("--topic", default="/scan", show_default=True, help="LaserScan topic.")
+@click.option("--topic", default="/scan", shell_complete=complete_topics, show_default=True, help="LaserScan topic.")
 @click.option("--init", type=click.Choice(["auto", "odom", "constant-velocity", "zero"]), default="auto",
               show_default=True,
               help="Guess NDT starts from first (auto: the odometry when the bag has it, else constant velocity); "

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import click
 
+from bagtools.cli.complete import complete_topics
+
 
 @click.command("slam")
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
-@click.option("--topic", default="/scan", show_default=True, help="LaserScan topic.")
+@click.option("--topic", default="/scan", shell_complete=complete_topics, show_default=True, help="LaserScan topic.")
 @click.option("--resolution", type=float, default=0.05, show_default=True,
               help="Map cell side in METRES (0.05: 5 cm cells; note: `bagtools grid --resolution` is cells per metre).")
 @click.option("--loop-search-radius", type=float, default=5.0, show_default=True,

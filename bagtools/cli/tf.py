@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from bagtools.cli.complete import complete_frames, complete_topics
+
 
 def _warn(warnings: list[str]) -> None:
     for warning in warnings:
@@ -53,8 +55,8 @@ def frames(bag: str, dot_file: str | None, force: bool) -> None:
 
 @tf.command()
 @click.argument("bag", type=click.Path(path_type=str))
-@click.argument("target")
-@click.argument("source")
+@click.argument("target", shell_complete=complete_frames)
+@click.argument("source", shell_complete=complete_frames)
 @click.option("--rate", "rate_hz", type=float, default=1.0, show_default=True, help="Samples per second of bag time.")
 @click.option("--csv", "csv_file", type=click.Path(path_type=str), help="Write the samples as CSV instead of text.")
 @click.option("--force", is_flag=True, help="Overwrite the --csv file if it exists.")
@@ -90,8 +92,8 @@ def echo(bag: str, target: str, source: str, rate_hz: float, csv_file: str | Non
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str),
               help="Directory for point.csv, point.png and summary.json.")
 @click.option("--point", type=float, nargs=3, default=None, metavar="X Y Z", help="A point in metres, fixed in --frame.")
-@click.option("--frame", help="The frame the --point is fixed in.")
-@click.option("--topic", help="Follow every geometry_msgs/PointStamped on this topic (e.g. /clicked_point).")
+@click.option("--frame", shell_complete=complete_frames, help="The frame the --point is fixed in.")
+@click.option("--topic", shell_complete=complete_topics, help="Follow every geometry_msgs/PointStamped on this topic (e.g. /clicked_point).")
 @click.option("--targets", help="Comma-separated frames to express the point in [default: those of "
                                 "map,odom,base_footprint in the bag].")
 @click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True, help="Time steps per second.")

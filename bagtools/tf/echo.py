@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import difflib
 import io
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bagtools.tf.buffer import TfBuffer, format_stamp
-from bagtools.tf.exceptions import ExtrapolationException
+from bagtools.tf.exceptions import ExtrapolationException, LookupException
 from bagtools.tf.sampling import sample_stamps
 from bagtools.transforms import quat2eul, xyzw2quat
 
@@ -87,4 +88,16 @@ def echo_csv(table: EchoTable) -> str:
 def echo_bag(bag: str | Path, target: str, source: str, rate_hz: float = 1.0) -> tuple[EchoTable, list[str]]:
     """Load the bag's tf and sample the transform: (table, warnings about skipped transforms)."""
     buffer = TfBuffer.from_bag(bag)
+    for frame in (target, source):
+        if frame and not frame.startswith("/") and frame not in buffer.frames:
+            raise LookupException(f"frame '{frame}' is not in the bag's tf ({nearest_frames(frame, buffer.frames)})",
+                                  Path(bag))
     return echo_transform(buffer, target, source, rate_hz), buffer.warnings
+
+
+def nearest_frames(frame: str, frames: list[str], n: int = 3) -> str:
+    """The bag's frames nearest to ``frame`` by name, as a phrase ("nearest by name: a, b, c")."""
+    if not frames:
+        return "it has no frames"
+    nearest = difflib.get_close_matches(frame, frames, n=n, cutoff=0.0)
+    return f"nearest by name: {', '.join(nearest)}; {len(frames)} frame(s) in all, see `bagtools tf frames`"

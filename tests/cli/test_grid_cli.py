@@ -55,6 +55,7 @@ def test_writes_a_nav2_map_png_and_summary(tmp_path: Path, capsys) -> None:
     nav2 = read_nav2_map(out_dir / "map.yaml")
     grid = summary["grid"]
     assert nav2.pixels.shape == (grid["rows"], grid["cols"])
+    assert f"{grid['cols']}x{grid['rows']} cells (width x height)" in out  # as nav2 and image tools say it
     assert set(np.unique(nav2.pixels)) == {0, 205, 254}
     assert nav2.origin == (*grid["origin_xy_m"], 0.0) and nav2.resolution_m == 0.05
     assert int((nav2.ternary() == 1).sum()) == grid["occupied_cells"]

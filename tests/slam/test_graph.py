@@ -86,13 +86,23 @@ def test_g2o_text_reads_back_with_gtsam(tmp_path) -> None:
     path.write_text(text)
     factors, values = gtsam.readG2o(str(path), False)
     assert values.size() == graph.n_nodes and factors.size() == len(graph.constraints)
+    assert lines[-1] == "FIX 0"  # the first vertex fixed, as g2o expects
     for k in range(graph.n_nodes):
         p = values.atPose2(k)
-        assert np.allclose([p.x(), p.y(), p.theta()], graph.poses[k], atol=1e-4)
+        assert np.allclose([p.x(), p.y(), p.theta()], graph.poses[k], rtol=0, atol=1e-12)  # full precision
     loop = factors.at(factors.size() - 1)
     assert np.allclose(loop.measured().translation(), [0.01, -0.02], atol=1e-6)
     information = loop.noiseModel().R().T @ loop.noiseModel().R()
-    assert np.allclose(information, np.linalg.inv(cov), rtol=1e-3)
+    assert np.allclose(information, np.linalg.inv(cov), rtol=1e-9)
+
+
+def test_g2o_text_keeps_far_coordinates_exact() -> None:
+    """Coordinates near 576 m (the CSAIL log's) keep every digit: 6 significant digits would be a millimetre."""
+    graph = PoseGraph(np.array([576.123456789, -312.987654321, 1.23456789]))
+    graph.add_node(np.array([577.000000001, -312.5, 1.3]))
+    graph.add(Constraint(0, 1, np.array([0.876543211, 0.1, 0.06543211]), np.diag([1e-4, 1e-4, 1e-5]), ODOMETRY))
+    vertex = graph.g2o_text().splitlines()[0].split()
+    assert [float(v) for v in vertex[2:]] == [576.123456789, -312.987654321, 1.23456789]
 
 
 def test_bad_constraints_are_refused() -> None:
