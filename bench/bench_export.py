@@ -16,7 +16,7 @@ from bagtools_simulate.pipeline import SimConfig, simulate_bag
 def _read_decode(bag: Path, topic: str) -> int:
     n = 0
     with open_bag(bag) as reader:
-        decode = DECODERS[reader.topics[topic].msgtype]
+        decode = DECODERS.get(reader.topics[topic].msgtype, lambda msg: msg)  # other types: deserializing is all
         for rec in reader.messages([topic]):
             decode(rec.msg)
             n += 1
@@ -30,7 +30,8 @@ def run(quick: bool) -> list[Row]:
         bag = Path(tmp) / "sim"
         simulate_bag(bag, SimConfig(duration_s=duration, cloud_size=(160, 120), cloud_rate_hz=2.0))
         cases = [("/odom", "csv"), ("/odom", "parquet"), ("/scan", "csv"), ("/scan", "parquet"), ("/scan", "npz"),
-                 ("/tf", "parquet"), ("/camera/depth/points", "parquet"), ("/camera/depth/points", "csv")]
+                 ("/tf", "parquet"), ("/camera/depth/points", "parquet"), ("/camera/depth/points", "csv"),
+                 ("/imu", "parquet"), ("/joint_states", "csv")]  # flattened from their definitions
         for topic, fmt in cases:
             out = Path(tmp) / f"out.{fmt}"
             summary = export_topic(bag, topic, out, force=True)
