@@ -302,12 +302,13 @@ class TfBuffer:
             if not new.any():
                 continue
             i = int(np.flatnonzero(new)[0])
+            parent, child = str(parents[i]), str(children[i])  # quoted as text, not as numpy's np.str_(...)
             if not skip_invalid:
                 raise InvalidArgumentException(
-                    f"invalid transform {parents[i]!r} -> {children[i]!r} "
+                    f"invalid transform {parent!r} -> {child!r} "
                     f"at {format_stamp(int(stamps[i]))}: {reason}", self.path)
             self.warnings.append(f"skipped {int(new.sum())} transform(s) ({reason}), "
-                                 f"e.g. {parents[i]!r} -> {children[i]!r} at {format_stamp(int(stamps[i]))}")
+                                 f"e.g. {parent!r} -> {child!r} at {format_stamp(int(stamps[i]))}")
             for name in set(children[new].tolist()) | set(parents[new].tolist()):
                 if name:
                     count = int(np.count_nonzero((children[new] == name) | (parents[new] == name)))

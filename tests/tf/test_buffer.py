@@ -431,3 +431,15 @@ def test_batch_matches_per_stamp_loop_on_random_chain() -> None:
         np.testing.assert_allclose(batch[k], buf.lookup("laser", "map", int(query[k])), atol=1e-12)
     R = batch[:, :3, :3]
     np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+
+
+def test_a_skipped_transform_is_named_as_text_not_as_a_numpy_repr() -> None:
+    """Frame ids come from numpy arrays; the warning quotes them as 'odom', not np.str_('odom')."""
+    from bagtools.io import TfArrays
+
+    arrays = TfArrays(parent=np.array(["odom", "odom"]), child=np.array(["base_link", "base_link"]),
+                      stamp_ns=np.array([1, 2], dtype=np.int64), translation=np.zeros((2, 3)),
+                      rotation_xyzw=np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 2.0]]))
+    buf = TfBuffer.from_arrays(arrays, skip_invalid=True)
+    assert len(buf.warnings) == 1 and "e.g. 'odom' -> 'base_link' at" in buf.warnings[0], buf.warnings
+    assert "np.str_" not in buf.warnings[0]
