@@ -143,3 +143,22 @@ def test_info_reads_a_carmen_log(tmp_path: Path) -> None:
     result = subprocess.run([sys.executable, "-m", "bagtools", "info", str(log)], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "carmen" in result.stdout and "/scan" in result.stdout and "base_link" in result.stdout
+
+
+@pytest.mark.parametrize("kind, topic, frame", [
+    ("RAWLASER1", "/scan", "laser"), ("RAWLASER2", "/scan_rear", "rear_laser"), ("RAWLASER3", "/scan3", "laser3"),
+    ("RAWLASER4", "/scan4", "laser4"), ("ROBOTLASER2", "/scan_rear", "rear_laser"), ("RLASER", "/scan_rear", "rear_laser"),
+])
+def test_every_laser_line_kind_has_its_topic(tmp_path: Path, kind: str, topic: str, frame: str) -> None:
+    ranges = " ".join(["1.50"] * 31)
+    if kind.startswith("RAWLASER"):
+        line = f"{kind} 0 -1.5 3.0 0.1 30.0 0.01 0 31 {ranges} 0 3.25 nohost 3.25"
+    elif kind == "ROBOTLASER2":
+        line = (f"{kind} 0 -1.5 3.0 0.1 30.0 0.01 0 31 {ranges} 0 0.0 0.0 3.1416 0.0 0.0 0.0 0.0 0.0 0.5 0.3 0.0 "
+                "3.25 nohost 3.25")
+    else:
+        line = flaser([1.5] * 180, (0.0, 0.0, 0.0), "3.25", kind=kind)
+    with open_bag(write(tmp_path / "run.clf", [line])) as bag:
+        assert bag.topics[topic].count == 1
+        scan = decode_laserscan(next(r.msg for r in bag.messages([topic])))
+    assert scan.frame_id == frame and scan.stamp_ns == 3_250_000_000 and np.allclose(scan.ranges_m, 1.5)
