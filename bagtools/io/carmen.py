@@ -23,8 +23,8 @@ benchmarks' relations decide against that for 180 beams: the Intel log (180 beam
 scores 0.249 m with odometry (Kümmerle's metric, every relation), with -89..+90 at 1 degree 0.033 m, centred
 (-89.5..+89.5) 0.178 m, and spread end to end 0.018 m, as the bag converted by the benchmark's maintainers.
 Freiburg 079 (360 beams) is indifferent (0.031 and 0.032 m). The maximum range of these lines is
-``PARAM robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else
-:data:`FLASER_MAX_RANGE_M`.
+``PARAM robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else the laser's no-return
+reading found in the log (:meth:`CarmenSource._max_range_of`), else :data:`FLASER_MAX_RANGE_M`.
 """
 
 from __future__ import annotations
@@ -46,6 +46,9 @@ from bagtools.io.reader import RawRecord, TopicInfo
 CARMEN_SUFFIXES = (".clf", ".log")
 #: A FLASER/RLASER line says no maximum range: SICK LMS lasers of these logs report no return at 81.83-81.91 m.
 FLASER_MAX_RANGE_M = 81.83
+#: How many FLASER/RLASER lines are read when the log is opened to find the laser's no-return reading.
+NO_RETURN_SAMPLE = 500
+NO_RETURN_MIN_LINES = 3
 #: Frames of the presented bag.
 ODOM_FRAME, BASE_FRAME = "odom", "base_link"
 SCAN_MSGTYPE, ODOM_MSGTYPE, TF_MSGTYPE = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
@@ -131,15 +134,15 @@ def _stamp_index(kind: str, words: list[bytes]) -> int:
     return k if kind.startswith("RAWLASER") else k + 11
 
 
-def _parse_laser(kind: str, words: list[bytes], params: dict[str, float]) -> _Laser:
-    """One laser line (``words`` without the keyword)."""
+def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float]) -> _Laser:
+    """One laser line (``words`` without the keyword); ``max_ranges``: the maximum range of FLASER/RLASER lines,
+    which do not say it (:meth:`CarmenSource._max_ranges`)."""
     if kind in ("FLASER", "RLASER"):
         n = int(words[0])
         ranges = np.asarray(_floats(words[1:1 + n]), dtype=np.float32)
         x, y, th, ox, oy, oth = _floats(words[1 + n:7 + n])
         start, increment = carmen_beam_geometry(n)
-        side = "front" if kind == "FLASER" else "rear"
-        max_range = params.get(f"robot_{side}_laser_max", FLASER_MAX_RANGE_M)
+        max_range = max_ranges.get(kind, FLASER_MAX_RANGE_M)
         return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, (ox, oy, oth), None)
     # RAWLASERk / ROBOTLASERk: laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
     start, _fov, increment, max_range = _floats(words[1:5])
@@ -204,13 +207,15 @@ class CarmenSource:
                     raise IndexError(f"{kind} line ends early ({len(text)} fields)")
                 stamp = _parse_odom(text)[0] if kind == "ODOM" else _stamp(text[at])
                 if self._mount is None and kind == "ROBOTLASER1":
-                    self._mount = _parse_laser(kind, text, self.params).laser_in_base
+                    self._mount = _parse_laser(kind, text, {}).laser_in_base
             except (ValueError, IndexError) as err:
                 bad[kind] += 1
                 first_bad = first_bad or f"line {i + 1}: {err}"
                 continue
             lines.append((i, kind, stamp))
         kinds = Counter(kind for _, kind, _ in lines)
+        self._max_range = {kind: self._max_range_of(kind, [i for i, k, _ in lines if k == kind])
+                           for kind in ("FLASER", "RLASER") if kinds[kind]}
         chosen = {topic: next((k for k in pref if kinds[k]), None) for topic, (pref, _) in _LASERS.items()}
         self._kind_of_topic = {t: k for t, k in chosen.items() if k is not None}
         used = set(self._kind_of_topic.values()) | {"ODOM"}
@@ -244,6 +249,33 @@ class CarmenSource:
         self.end_ns = records[-1][0] if records else 0
         self.message_count = len(records)
 
+    def _max_range_of(self, kind: str, indexes: list[int]) -> float:
+        """The maximum range of a FLASER/RLASER laser (m): ``PARAM robot_front_laser_max`` (rear), else the laser's
+        no-return reading, else FLASER_MAX_RANGE_M. A laser reports no return as its largest reading, over and
+        over (50.00 in the ACES log, 81.83 in Intel's, 81.91 in Freiburg 079's): the largest reading of the first
+        NO_RETURN_SAMPLE lines is that value when it is also the most frequent of the readings above half of it
+        and comes in at least NO_RETURN_MIN_LINES lines (real far returns spread over centimetres; a saturated one
+        repeats, scan after scan)."""
+        side = "front" if kind == "FLASER" else "rear"
+        if f"robot_{side}_laser_max" in self.params:
+            return self.params[f"robot_{side}_laser_max"]
+        readings = []
+        for i in indexes[:NO_RETURN_SAMPLE]:
+            words = self._lines[i].split()
+            try:
+                readings.append(np.asarray(_floats(words[2:2 + int(words[1])]), dtype=np.float32))
+            except (ValueError, IndexError):  # a damaged line: skipped (and said) when read
+                continue
+        if len(readings) < NO_RETURN_MIN_LINES:
+            return FLASER_MAX_RANGE_M
+        top = max(float(r.max(initial=0.0)) for r in readings)
+        lines_at_top = sum(bool((r == top).any()) for r in readings)
+        values = np.concatenate(readings)
+        far, counts = np.unique(values[values > 0.5 * top], return_counts=True)
+        if top > 0 and lines_at_top >= NO_RETURN_MIN_LINES and counts[-1] == counts.max():
+            return top
+        return FLASER_MAX_RANGE_M
+
     def _has_static(self) -> bool:
         return self._mount is not None or "/scan_rear" in self._kind_of_topic
 
@@ -271,7 +303,7 @@ class CarmenSource:
         if kind == "ODOM":
             stamp, pose = _parse_odom(text)
         else:
-            laser = _parse_laser(kind, text, self.params)
+            laser = _parse_laser(kind, text, self._max_range)
             stamp, pose = laser.stamp_ns, laser.odom
             if rec.topic not in ("/odom", "/tf"):
                 return self._scan(laser, rec.topic, seq)

@@ -162,3 +162,28 @@ def test_every_laser_line_kind_has_its_topic(tmp_path: Path, kind: str, topic: s
         assert bag.topics[topic].count == 1
         scan = decode_laserscan(next(r.msg for r in bag.messages([topic])))
     assert scan.frame_id == frame and scan.stamp_ns == 3_250_000_000 and np.allclose(scan.ranges_m, 1.5)
+
+
+@pytest.mark.parametrize("saturation", [50.0, 81.91])
+def test_a_laser_that_reports_no_return_as_its_largest_reading_is_found(tmp_path: Path, saturation: float) -> None:
+    """FLASER lines say no maximum range; the ACES log reports no return as 50.00 over and over, Freiburg 079's
+    as 81.91: that reading becomes +inf. A lone far return is a return."""
+    rng = np.random.default_rng(0)
+    lines = []
+    for k in range(20):
+        ranges = rng.uniform(1.0, 30.0, 180).round(2)
+        ranges[k % 7::9] = saturation
+        lines.append(flaser(list(ranges), (0.0, 0.0, 0.0), f"{10 + k}.0"))
+    lone = rng.uniform(1.0, 8.0, 180).round(2)
+    lone[3] = 40.0  # one far return, the largest reading of its log: no saturation
+    with open_bag(write(tmp_path / "sat.clf", lines)) as bag:
+        scans = [decode_laserscan(r.msg) for r in bag.messages(["/scan"])]
+    assert all(s.range_max_m == pytest.approx(saturation) for s in scans)
+    assert sum(int(np.isinf(s.ranges_m).sum()) for s in scans) > 300
+    assert all(np.isfinite(s.ranges_m[s.ranges_m < saturation]).all() for s in scans)
+    with open_bag(write(tmp_path / "lone.clf", [flaser(list(lone), (0.0, 0.0, 0.0), "5.0")])) as bag:
+        scan = decode_laserscan(next(r.msg for r in bag.messages(["/scan"])))
+    assert scan.ranges_m[3] == pytest.approx(40.0) and scan.range_max_m == pytest.approx(FLASER_MAX_RANGE_M)
+    log = write(tmp_path / "param.clf", ["PARAM robot_front_laser_max 25.0 nohost 0", lines[0]])
+    with open_bag(log) as bag:
+        assert decode_laserscan(next(r.msg for r in bag.messages(["/scan"]))).range_max_m == pytest.approx(25.0)
