@@ -22,7 +22,7 @@ a SICK in its 100-degree mode). CARMEN's own ``carmen_laser_get_angle_increment`
 benchmarks' relations decide against that for 180 beams: the Intel log (180 beams) read with CARMEN's spacing
 scores 0.249 m with odometry (Kümmerle's metric, every relation), with -89..+90 at 1 degree 0.033 m, centred
 (-89.5..+89.5) 0.178 m, and spread end to end 0.018 m, as the bag converted by the benchmark's maintainers.
-Freiburg 079 (360 beams) is indifferent (0.031 and 0.032 m). The maximum range of these lines is
+ACES (180 beams, 0.036 and 0.038 m) and Freiburg 079 (360 beams, 0.031 and 0.032 m) are indifferent. The maximum range of these lines is
 ``PARAM robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else the laser's no-return
 reading found in the log (:meth:`CarmenSource._max_range_of`), else :data:`FLASER_MAX_RANGE_M`.
 """
