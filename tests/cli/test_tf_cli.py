@@ -98,7 +98,7 @@ def test_point_from_clicked_topic_with_default_targets(drive_bag: Path, tmp_path
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["tf", "echo", "{bag}", "odom", "nothere"], '"nothere" passed to'),
+    (["tf", "echo", "{bag}", "odom", "nothere"], "frame 'nothere' is not in the bag's tf (nearest by name: "),
     (["tf", "echo", "{bag}", "odom", "/odom"], "cannot start with a '/'"),
     (["tf", "echo", "{bag}", "odom", "base_link", "--rate", "0"], "rate must be a positive"),
     (["tf", "point", "{bag}", "--out", "{tmp}/p", "--point", "1", "2", "3", "--frame", "map", "--targets", "map,moon"],
@@ -112,7 +112,7 @@ def test_bad_input_is_one_line_and_exit_2(drive_bag: Path, tmp_path: Path, capsy
     code, _, err = run(argv, capsys)
     assert code == 2
     assert err.startswith("bagtools: ") and err.count("\n") == 1 and message in err
-    assert "Known frames" in err or "nothere" not in message
+    assert "frame(s) in all, see `bagtools tf frames`" in err or "nothere" not in message
 
 
 def test_unconnected_frames_exit_2(tmp_path: Path, capsys) -> None:
