@@ -97,14 +97,14 @@ def stamp_text_to_ns(text: str) -> int:
 
 @dataclass(frozen=True)
 class _Laser:
-    """What a laser line says: the scan geometry, ranges, the line's odometry and laser poses, its stamp."""
+    """What a laser line says: the scan geometry, ranges, the laser's pose on the robot (where the line says it),
+    its stamp (the odometry of the line: :func:`_laser_odometry`)."""
 
     stamp_ns: int
     start_rad: float
     increment_rad: float
     max_range_m: float
     ranges: np.ndarray
-    odom: tuple[float, float, float] | None  # the robot's odometry pose
     laser_in_base: tuple[float, float, float] | None  # the laser's pose on the robot, where the line says
 
 
@@ -136,14 +136,13 @@ def _stamp_index(kind: str, words: list[bytes]) -> int:
 
 def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float]) -> _Laser:
     """One laser line (``words`` without the keyword); ``max_ranges``: the maximum range of FLASER/RLASER lines,
-    which do not say it (:meth:`CarmenSource._max_ranges`)."""
+    which do not say it (:meth:`CarmenSource._max_range_of`)."""
     if kind in ("FLASER", "RLASER"):
         n = int(words[0])
         ranges = np.asarray(_floats(words[1:1 + n]), dtype=np.float32)
-        x, y, th, ox, oy, oth = _floats(words[1 + n:7 + n])
         start, increment = carmen_beam_geometry(n)
         max_range = max_ranges.get(kind, FLASER_MAX_RANGE_M)
-        return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, (ox, oy, oth), None)
+        return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, None)
     # RAWLASERk / ROBOTLASERk: laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
     start, _fov, increment, max_range = _floats(words[1:5])
     n = int(words[7])
@@ -152,11 +151,23 @@ def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float]) ->
     n_remissions = int(words[k])
     k += 1 + n_remissions
     if kind.startswith("RAWLASER"):
-        return _Laser(_stamp(words[k]), start, increment, max_range, ranges, None, None)
+        return _Laser(_stamp(words[k]), start, increment, max_range, ranges, None)
     lx, ly, lth, rx, ry, rth = _floats(words[k:k + 6])
     c, s = math.cos(rth), math.sin(rth)
     mount = (c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), math.remainder(lth - rth, 2 * math.pi))
-    return _Laser(_stamp(words[k + 11]), start, increment, max_range, ranges, (rx, ry, rth), mount)
+    return _Laser(_stamp(words[k + 11]), start, increment, max_range, ranges, mount)
+
+
+def _laser_odometry(kind: str, words: list[bytes]) -> tuple[int, tuple[float, float, float]]:
+    """(stamp, robot odometry pose) of a FLASER/RLASER/ROBOTLASER line, its ranges left unparsed."""
+    if kind in ("FLASER", "RLASER"):
+        n = int(words[0])
+        x, y, th = _floats(words[4 + n:7 + n])
+        return _stamp(words[7 + n]), (x, y, th)
+    k = 8 + int(words[7])
+    k += 1 + int(words[k])  # the remissions
+    x, y, th = _floats(words[k + 3:k + 6])
+    return _stamp(words[k + 11]), (x, y, th)
 
 
 def _parse_odom(words: list[bytes]) -> tuple[int, tuple[float, float, float]]:
@@ -300,13 +311,9 @@ class CarmenSource:
             return self._static(rec.log_time_ns)
         words = line.split()
         kind, text = words[0].decode("ascii", "replace"), words[1:]
-        if kind == "ODOM":
-            stamp, pose = _parse_odom(text)
-        else:
-            laser = _parse_laser(kind, text, self._max_range)
-            stamp, pose = laser.stamp_ns, laser.odom
-            if rec.topic not in ("/odom", "/tf"):
-                return self._scan(laser, rec.topic, seq)
+        if rec.topic not in ("/odom", "/tf"):
+            return self._scan(_parse_laser(kind, text, self._max_range), rec.topic, seq)
+        stamp, pose = _parse_odom(text) if kind == "ODOM" else _laser_odometry(kind, text)
         if rec.topic == "/odom":
             return self._odometry(stamp, pose, seq)
         return self._types["tf2_msgs/msg/TFMessage"](transforms=[self._transform(stamp, ODOM_FRAME, BASE_FRAME, pose, seq)])

@@ -612,8 +612,7 @@ class LaserOdometry:
 
     def _short_step(self, dt: float) -> bool:
         """A time step under SHORT_STEP_RATIO of the recent typical one: its stamp is suspect."""
-        recent = self._steps_s[-20:]
-        return bool(recent) and dt < SHORT_STEP_RATIO * float(np.median(recent))
+        return bool(self._steps_s) and dt < SHORT_STEP_RATIO * self._typical_step()
 
     def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, last: np.ndarray, best: _Match) -> _Match | None:
         """The best match in the largest window around ``last`` (the previous scan's pose in the keyframe's frame:
