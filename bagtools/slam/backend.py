@@ -17,6 +17,12 @@ system would:
    the loops' median residual, see :meth:`_Builder.outlier_gate`), and the
    worst loop above it is dropped and the graph optimized again, until none is.
    Later searches use the corrected estimate.
+4. when no loop has been accepted for a while, a global search (see
+   :mod:`bagtools.slam.constraints`) matches the keyframe against old maps
+   anywhere; its best match is followed up at the next keyframes in small
+   windows around where it puts them, and enters the graph only with a
+   consistent follow-up. The graph's robust loop kernel and the outlier check
+   hold against a wrong pair that got through.
 
 At the end, matches still waiting for confirmation are rejected and the graph
 is optimized once more (with the same outlier check).
@@ -41,7 +47,7 @@ from scipy.sparse.csgraph import dijkstra
 from bagtools.ndtodom.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.slam.constraints import (
-    ACCEPTED, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
+    ACCEPTED, FOLLOW_UP, GLOBAL, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
 )
 from bagtools.slam.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
@@ -212,10 +218,47 @@ class _Builder:
                 continue
             for c in self.check.review(cand, self.graph.poses):
                 self._add_loop(c)
+        self._follow_up(node, distance)
+        last_loop = max((c.new for c in self.check.accepted), default=None)
+        if self.search.global_due(node, last_loop):
+            self._global_search(node)
         self.check.expire(node)
         due = self._loops_since_optimization and node - self._last_optimization >= o.optimize_every
         if self.counts["large corrections"] or due:
             self._optimize(node)
+
+    def _global_search(self, node: int) -> None:
+        """Match ``node`` against old maps anywhere; the best match enters the graph when an accepted loop agrees
+        with it, and otherwise waits for a follow-up."""
+        self.counts["global searches"] += 1
+        matches = []
+        for old in self.search.global_tiles(node, self.graph.poses):
+            cand = self.search.match(old, node, self.graph.poses, (0.0, 0.0), kind=GLOBAL)
+            self.counts["global matches tried"] += 1
+            if cand.T_old_new is not None:
+                matches.append(cand)
+        if matches:
+            best = max(matches, key=lambda c: c.score)
+            self.candidates.append(best)
+            for c in self.check.review(best, self.graph.poses):  # confirmed at once by an accepted loop, or waits
+                self._add_loop(c)
+
+    def _follow_up(self, node: int, distance: np.ndarray) -> None:
+        """Match ``node`` where each pending global match puts it, once its new map shares no keyframe with the
+        match's (the old chain, the match, the new chain); a consistent follow-up confirms the pair."""
+        o = self.options.loop
+        poses = self.graph.poses
+        for p in self.check.pending_global():
+            if node - p.new <= o.new_map_keyframes:
+                continue
+            guess = se2_compose(p.T_old_new, se2_between(poses[p.new], poses[node]))
+            sigma_t, sigma_r = self.search.sigmas(abs(self.search.path_m[node] - self.search.path_m[p.new]))
+            cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess, kind=FOLLOW_UP)
+            self.candidates.append(cand)
+            if cand.T_old_new is None:
+                continue
+            for c in self.check.review(cand, poses):
+                self._add_loop(c)
 
     def _add_loop(self, cand: LoopCandidate) -> None:
         self.graph.add(Constraint(cand.old, cand.new, cand.T_old_new, cand.covariance, LOOP))

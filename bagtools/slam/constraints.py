@@ -49,6 +49,23 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    within the gate: E. Olson's single-cluster test in its smallest form); both
    are then accepted. Unconfirmed matches are rejected.
 
+5. **Global search** (:meth:`LoopClosureSearch.global_due`,
+   :meth:`LoopClosureSearch.global_tiles`): the search above trusts the
+   estimate to within its gate, which after a long loop or one bad step it is
+   not. So once the robot has gone ``global_after_m`` of path without an
+   accepted loop (and again every ``global_after_m`` while none comes), the new
+   keyframe is matched against old maps anywhere, whatever the estimate says
+   (W. Hess et al.'s global constraint search, at a sampling ratio): one old
+   map per ``global_tile_m`` of old path, the ``global_max_tiles`` nearest in
+   the estimate at most, each searched over +- ``global_window_m`` around the
+   old keyframe and every heading by the branch and bound, which
+   ``global_min_score`` prunes early. The best match waits (``PENDING``) for a
+   **follow-up**: each later keyframe whose new map shares none of its
+   keyframes is matched in a small window around where that match puts it (the
+   old chain, the match, the new chain); a follow-up at ``min_score`` that is
+   pairwise consistent confirms both. Nothing about a global match is checked
+   against the estimate: that is what it corrects.
+
 Every candidate is recorded as a :class:`LoopCandidate` with what happened to it.
 """
 
@@ -72,6 +89,8 @@ REFINE_FAILED = "NDT refinement failed or moved away"
 INCONSISTENT = "disagrees with the estimate"
 UNCONFIRMED = "unconfirmed: no consistent second match"
 OUTLIER = "outlier after optimization"
+# Candidate kinds: searched around the estimate, anywhere, or around a pending global match.
+LOCAL, GLOBAL, FOLLOW_UP = "local", "global", "follow-up"
 TOO_FEW_POINTS = "too few points"
 
 
@@ -110,18 +129,24 @@ class LoopOptions:
     max_refine_m: float = 0.3
     max_refine_rad: float = 0.1
     cache_size: int = 64
+    global_after_m: float = 30.0
+    global_tile_m: float = 4.0
+    global_window_m: float = 4.0
+    global_min_score: float = 0.6
+    global_max_tiles: int = 64
 
     def __post_init__(self) -> None:
         for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m",
                      "drift_rad_per_m", "loop_edge_m", "angular_reach_m", "gate_sigmas", "min_window_m", "min_window_rad",
                      "resolution_m", "max_range_m", "loop_spacing_m", "sure_sigma_m", "pair_max_path_m", "ndt_cell_m",
-                     "max_refine_m", "max_refine_rad"):
+                     "max_refine_m", "max_refine_rad", "global_after_m", "global_tile_m", "global_window_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        if not 0.0 <= self.min_score <= 1.0:
-            raise ValueError(f"min_score must be in [0, 1], got {self.min_score!r}")
-        for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size"):
+        for name in ("min_score", "global_min_score"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
+        for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size", "global_max_tiles"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)!r}")
         if self.old_map_keyframes < 0 or self.new_map_keyframes < 0 or self.turn_m_per_rad < 0:
@@ -136,7 +161,9 @@ class LoopCandidate:
     ``window``: the search half-widths (m, m, rad); ``sigma``: the estimate's
     uncertainty of it (m, rad); ``T_old_new``, ``covariance``: the match (None
     when it failed); ``score``: correlative score in [0, 1]; ``status``:
-    ``ACCEPTED``, ``PENDING`` or why it was rejected; ``time_s``: match time.
+    ``ACCEPTED``, ``PENDING`` or why it was rejected; ``time_s``: match time;
+    ``kind``: ``LOCAL`` (around the estimate), ``GLOBAL`` (anywhere) or ``FOLLOW_UP`` (around a pending global
+    match).
     """
 
     old: int
@@ -149,9 +176,10 @@ class LoopCandidate:
     score: float = 0.0
     status: str = PENDING
     time_s: float = 0.0
+    kind: str = LOCAL
 
     def as_dict(self) -> dict:
-        out = {"old": self.old, "new": self.new, "status": self.status, "score": round(self.score, 4),
+        out = {"old": self.old, "new": self.new, "kind": self.kind, "status": self.status, "score": round(self.score, 4),
                "sigma_m": round(self.sigma[0], 4), "sigma_rad": round(self.sigma[1], 4),
                "window": [round(float(v), 4) for v in self.window], "time_ms": round(self.time_s * 1e3, 2)}
         if self.T_old_new is not None:
@@ -247,6 +275,7 @@ class LoopClosureSearch:
         self.motions: list[np.ndarray] = []  # per keyframe: [x, y, theta] from the previous keyframe
         self.motion_covariances: list[np.ndarray] = []  # and its covariance
         self._last_wide_m = -math.inf  # path length at the last wide search
+        self._last_global_m = -math.inf  # path length at the last global search
         self._cache: OrderedDict[int, _OldMap] = OrderedDict()
 
     def add_keyframe(self, points_base: np.ndarray, motion: np.ndarray | None,
@@ -298,9 +327,7 @@ class LoopClosureSearch:
         """
         o = self.options
         path = np.asarray(self.path_m)
-        # far enough back along the path, and the two local maps share no keyframe (else the match repeats the chain)
-        last = new - o.new_map_keyframes - o.old_map_keyframes - 1
-        old = np.flatnonzero(path[new] - path[: max(last, 0)] >= o.min_travel_m)
+        old = self._far_back(new)
         if old.size == 0:
             return []
         dist = np.hypot(*(poses[old, :2] - poses[new, :2]).T)
@@ -328,6 +355,14 @@ class LoopClosureSearch:
             chosen.append(a)
         return chosen
 
+    def _far_back(self, new: int) -> np.ndarray:
+        """Old keyframes ``new`` may close a loop with: at least ``min_travel_m`` back along the path, and far
+        enough back in the chain that the two local maps share no keyframe (else the match repeats the chain)."""
+        o = self.options
+        path = np.asarray(self.path_m)
+        last = new - o.new_map_keyframes - o.old_map_keyframes - 1
+        return np.flatnonzero(path[new] - path[: max(last, 0)] >= o.min_travel_m)
+
     def _tied(self, run: np.ndarray, new: int, loops: list[tuple[int, int]]) -> bool:
         """True if an accepted loop from the last ``loop_spacing_m`` of path already lands in (or next to) ``run``."""
         o = self.options
@@ -335,18 +370,49 @@ class LoopClosureSearch:
         lo, hi = path[int(run[0])] - o.search_radius_m, path[int(run[-1])] + o.search_radius_m
         return any(path[new] - path[b] < o.loop_spacing_m and lo <= path[a] <= hi for a, b in loops)
 
+    def global_due(self, new: int, last_loop_new: int | None) -> bool:
+        """Is a global search due at keyframe ``new``? Yes once ``global_after_m`` of path has passed since both
+        the last accepted loop (its new keyframe ``last_loop_new``, None for none) and the last global search."""
+        o = self.options
+        path = self.path_m
+        since_loop = path[new] - (path[last_loop_new] if last_loop_new is not None else 0.0)
+        if since_loop < o.global_after_m or path[new] - self._last_global_m < o.global_after_m:
+            return False
+        self._last_global_m = path[new]
+        return True
+
+    def global_tiles(self, new: int, poses: np.ndarray) -> list[int]:
+        """Old keyframes to search globally from ``new``: one per ``global_tile_m`` of old path (the middle one),
+        far enough back as for :meth:`candidates`, the ``global_max_tiles`` nearest in the estimate ``poses``."""
+        o = self.options
+        path = np.asarray(self.path_m)
+        old = self._far_back(new)
+        if old.size == 0:
+            return []
+        tile = np.floor(path[old] / o.global_tile_m).astype(np.int64)
+        starts = np.flatnonzero(np.r_[True, np.diff(tile) != 0])
+        ends = np.r_[starts[1:], old.size]
+        middles = old[(starts + ends - 1) // 2]
+        dist = np.hypot(*(poses[middles, :2] - poses[new, :2]).T)
+        return [int(a) for a in middles[np.argsort(dist, kind="stable")][: o.global_max_tiles]]
+
     # -- matching --------------------------------------------------------------------------------
 
-    def _old_map(self, old: int, poses: np.ndarray) -> _OldMap:
+    def _old_map(self, old: int, poses: np.ndarray, cache: bool = True) -> _OldMap:
+        """The old map around ``old`` (see the module docstring); built once and kept in the LRU cache, unless
+        ``cache`` is False (a global search's tiles, which must not push out the maps local searches reuse)."""
         cached = self._cache.get(old)
         if cached is not None:
-            self._cache.move_to_end(old)
+            if cache:
+                self._cache.move_to_end(old)
             return cached
         o = self.options
         keyframes = self._old_range(old)
         points = self._moved(keyframes, poses, poses[old])
         built = _OldMap(CorrelativeReference.from_points(points, o.resolution_m),
                         NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes))
+        if not cache:
+            return built
         self._cache[old] = built
         if len(self._cache) > o.cache_size:
             self._cache.popitem(last=False)
@@ -390,21 +456,30 @@ class LoopClosureSearch:
             out.append(self.points[k] @ np.array([[c, s], [-s, c]]) + T[:2])
         return np.vstack(out) if out else np.zeros((0, 2))
 
-    def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
-        """Match keyframe ``new`` against the old map around ``old`` from the estimate ``poses``; the record.
+    def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float],
+              guess: np.ndarray | None = None, kind: str = LOCAL) -> LoopCandidate:
+        """Match keyframe ``new`` against the old map around ``old``; the record.
 
-        ``sigma``: the estimate's uncertainty of their relative pose (m, rad).
+        ``sigma``: the uncertainty (m, rad) of the relative pose ``guess`` of
+        ``new`` in ``old``'s frame (default: from the estimate ``poses``),
+        which sizes the window. ``kind=GLOBAL`` searches +- ``global_window_m``
+        around ``old`` itself and every heading, with ``global_min_score``.
         """
         o = self.options
         t0 = time.perf_counter()
-        guess = se2_between(poses[old], poses[new])
-        window = self.window(sigma)
-        cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])))
-        old_map = self._old_map(old, poses)
+        min_score = o.min_score
+        if kind == GLOBAL:
+            guess, window, min_score = np.zeros(3), np.array([o.global_window_m, o.global_window_m, math.pi]), \
+                o.global_min_score
+        else:
+            guess = se2_between(poses[old], poses[new]) if guess is None else np.asarray(guess, dtype=np.float64)
+            window = self.window(sigma)
+        cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])), kind=kind)
+        old_map = self._old_map(old, poses, cache=kind != GLOBAL)
         current = self._new_map(new, poses)
         reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
         grid = match_scans_grid(current, old_map.correlative, initial_pose=guess, search_range=window,
-                                angular_resolution_rad=self.angular_step(reach), min_score=o.min_score)
+                                angular_resolution_rad=self.angular_step(reach), min_score=min_score)
         if not grid.ok:
             cand.status = TOO_FEW_POINTS if "too few" in grid.reason else LOW_SCORE
             cand.time_s = time.perf_counter() - t0
@@ -446,10 +521,10 @@ class ConsistencyCheck:
         o = self.options
         residual = se2_between(cand.guess, cand.T_old_new)
         gate_t, gate_r = self.gate(cand.sigma)
-        if np.hypot(residual[0], residual[1]) > gate_t or abs(residual[2]) > gate_r:
+        if cand.kind != GLOBAL and (np.hypot(residual[0], residual[1]) > gate_t or abs(residual[2]) > gate_r):
             cand.status = INCONSISTENT
             return []
-        if cand.sigma[0] <= o.sure_sigma_m:
+        if cand.kind == LOCAL and cand.sigma[0] <= o.sure_sigma_m:
             cand.status = ACCEPTED
             self.accepted.append(cand)
             return [cand]
@@ -484,6 +559,10 @@ class ConsistencyCheck:
         sigma_r = math.sqrt(2.0) * o.resolution_m / o.angular_reach_m + o.drift_rad_per_m * chain_m
         return bool(np.hypot(cycle[0], cycle[1]) <= o.gate_sigmas * sigma_t
                     and abs(wrap_to_pi(cycle[2])) <= o.gate_sigmas * sigma_r)
+
+    def pending_global(self) -> list[LoopCandidate]:
+        """The global matches waiting for a follow-up."""
+        return [p for p in self.pending if p.kind == GLOBAL]
 
     def expire(self, newest: int) -> list[LoopCandidate]:
         """Reject pending matches older than ``pending_keyframes`` keyframes before ``newest``; returns them."""

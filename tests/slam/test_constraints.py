@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from bagtools.slam.constraints import (
-    ACCEPTED, INCONSISTENT, PENDING, UNCONFIRMED, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
-    voxel_subsample,
+    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, PENDING, UNCONFIRMED, ConsistencyCheck, LoopCandidate,
+    LoopClosureSearch, LoopOptions, voxel_subsample,
 )
 from bagtools.transforms import se2_between, se2_compose
 from tests.slam.standin import true_poses_at_scans
@@ -108,8 +108,46 @@ def test_consistency_check() -> None:
     assert aliased.status == UNCONFIRMED
 
 
+def test_a_global_match_needs_a_follow_up_and_is_not_gated_by_the_estimate() -> None:
+    # The estimate puts the new pass (keyframes 20..29) 8 m and 40 degrees away from the old one it retraces.
+    poses = np.zeros((30, 3))
+    poses[:10, 0] = np.arange(10)
+    poses[20:] = [se2_compose([8.0, 3.0, 0.7], [k, 0.0, 0.0]) for k in range(10)]
+    path = list(np.arange(30, dtype=float) * 1.0)
+    check = ConsistencyCheck(LoopOptions(), path)
+    same = np.zeros(3)
+    found = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (0.0, 0.0), same, np.eye(3) * 1e-4, 0.8,
+                          kind=GLOBAL)
+    assert check.review(found, poses) == [] and found.status == PENDING and check.pending_global() == [found]
+    # a sure local match elsewhere does not confirm it; a follow-up where it puts keyframe 28 does
+    wrong = LoopCandidate(2, 28, same, np.array([0.3, 0.3, 0.1]), (0.05, 0.01), np.array([1.5, 0.0, 0.0]),
+                          np.eye(3) * 1e-4, 0.8, kind=FOLLOW_UP)
+    assert check.review(wrong, poses) == [] and found.status == PENDING
+    guess = se2_compose(found.T_old_new, se2_between(poses[22], poses[28]))
+    follow = LoopCandidate(2, 28, guess, np.array([0.3, 0.3, 0.1]), (0.2, 0.06), guess, np.eye(3) * 1e-4, 0.8,
+                           kind=FOLLOW_UP)
+    assert set(map(id, check.review(follow, poses))) == {id(found), id(follow)}
+    assert found.status == ACCEPTED and not check.pending_global()
+
+
+def test_global_tiles_cover_the_old_path_once_per_tile() -> None:
+    search = LoopClosureSearch(LoopOptions(global_tile_m=4.0, global_max_tiles=100))
+    for k in range(70):  # a straight 69 m path, keyframes 1 m apart
+        search.add_keyframe(np.zeros((0, 2)), None if k == 0 else np.array([1.0, 0.0, 0.0]))
+    poses = np.c_[np.arange(70.0), np.zeros(70), np.zeros(70)]
+    tiles = search.global_tiles(69, poses)
+    path = np.asarray(search.path_m)
+    assert sorted(tiles) == tiles[::-1]  # the nearest first
+    assert all(path[69] - path[a] >= 8.0 for a in tiles) and len(set(np.floor(path[tiles] / 4.0))) == len(tiles)
+    assert len(tiles) == 16  # old keyframes 0..60 (those of the new and old maps excluded) in 16 tiles of 4 m
+    # due once 30 m have passed since the last accepted loop and since the last global search
+    assert not search.global_due(20, None) and search.global_due(30, None) and not search.global_due(59, None)
+    assert not search.global_due(69, 40) and search.global_due(69, 25)
+
+
 @pytest.mark.parametrize("field,value", [("search_radius_m", 0.0), ("min_score", 1.5), ("max_candidates", 0),
-                                         ("old_map_keyframes", -1), ("drift_per_m", float("nan"))])
+                                         ("old_map_keyframes", -1), ("drift_per_m", float("nan")),
+                                         ("global_min_score", -0.1), ("global_tile_m", 0.0), ("global_max_tiles", 0)])
 def test_bad_loop_options(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         LoopOptions(**{field: value})
