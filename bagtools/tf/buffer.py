@@ -50,6 +50,12 @@ from bagtools.tf.exceptions import (
 # tf2's tolerance on | |q|^2 - 1 | for an accepted quaternion.
 QUATERNION_NORMALIZATION_TOLERANCE = 10e-3
 
+#: A transform whose translation is farther than this on any axis is damage, not data, and is invalid like a NaN
+#: (no robot's frame is a million kilometres from its parent: ECEF and UTM coordinates stay below 1e7 m). Past some
+#: 1e14 m a metre no longer shows in a float64 sum and past 3.4e38 m a float32 point is infinite, so such a
+#: transform would collapse a map, a grid or a picture to no extent (or a NaN one) wherever it is used.
+MAX_TRANSLATION_M = 1.0e9
+
 _OK, _PAST, _FUTURE, _SINGLE = 0, 1, 2, 3
 
 # Stamps resolved per block of a batch lookup (sized for the CPU cache).
@@ -208,7 +214,7 @@ class TfBuffer:
         self._frames: list[_Frame] = []
         self.path: str | None = None       # the bag the buffer came from, for error messages
         self.warnings: list[str] = []      # transforms skipped by from_bag / from_arrays(skip_invalid=True)
-        self.invalid_dropped: dict[str, int] = {}   # frame -> transforms of it skipped as invalid (NaN, zero quaternion)
+        self.invalid_dropped: dict[str, int] = {}   # frame -> transforms of it skipped as invalid (NaN, far off, zero quaternion)
         self.bag_span_ns: tuple[int, int] | None = None   # (start_ns, end_ns) of the bag, set by from_bag
 
     # ------------------------------------------------------------------ loading
@@ -268,7 +274,8 @@ class TfBuffer:
         One transform (str, str, int, (3,), (4,)) or N of them ((N,) frame ids or
         one id for all, (N,) int ns, (N,3) metres, (N,4) quaternions in ROS order
         x, y, z, w). Raises :class:`InvalidArgumentException` for empty frame ids,
-        a child equal to its parent, NaN or infinite values, quaternions whose
+        a child equal to its parent, NaN or infinite values, a translation beyond
+        :data:`MAX_TRANSLATION_M` on an axis, quaternions whose
         squared norm is off 1 by 0.01 or more, or non-integer stamps; nothing is
         added then.
         """
@@ -294,6 +301,8 @@ class TfBuffer:
             (~np.isfinite(trans).all(axis=1) | ~np.isfinite(rot).all(axis=1), "NaN or infinite value"),
         ]
         with np.errstate(invalid="ignore"):
+            reasons.append(((np.abs(trans) > MAX_TRANSLATION_M).any(axis=1),
+                            f"translation beyond {MAX_TRANSLATION_M:g} m"))
             norm_sq = np.einsum("ni,ni->n", rot, rot)
         reasons.append((~(np.abs(norm_sq - 1.0) < QUATERNION_NORMALIZATION_TOLERANCE) & np.isfinite(norm_sq),
                         "quaternion is not normalized"))
@@ -397,8 +406,8 @@ class TfBuffer:
 
     def invalid_note(self, *frames: str) -> str:
         """Why a frame may be missing or cut off: its transforms were invalid and dropped when loading."""
-        notes = [f"{self.invalid_dropped[f]} transform(s) of '{f}' were invalid (NaN, infinite or a zero quaternion) "
-                 "and dropped" for f in frames if self.invalid_dropped.get(f)]
+        notes = [f"{self.invalid_dropped[f]} transform(s) of '{f}' were invalid (NaN, infinite, beyond "
+                 f"{MAX_TRANSLATION_M:g} m or a zero quaternion) and dropped" for f in frames if self.invalid_dropped.get(f)]
         return f" ({'; '.join(notes)})" if notes else ""
 
     def _known_frames(self) -> str:

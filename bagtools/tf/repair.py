@@ -21,6 +21,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from bagtools.io import ODOMETRY_TYPES, BagReader, TfArrays, decode_odometry
+from bagtools.tf.buffer import MAX_TRANSLATION_M
 
 BASE_FRAME_CANDIDATES = ("base_footprint", "base_link")
 """Conventional robot base frames (REP 105), tried when nothing else names the base."""
@@ -169,7 +170,8 @@ def inspect_edge(stamps_ns: np.ndarray, translation: np.ndarray, rotation_xyzw: 
         glitch = _glitches(translation[rows], _sign_aligned(_unit(rotation_xyzw[rows])))
         found.glitches = int(glitch.size)
         rows = np.delete(rows, glitch)
-    finite = rows[np.isfinite(translation[rows]).all(axis=1)]  # corrupt values are the buffer's to refuse
+    with np.errstate(invalid="ignore"):  # NaN, inf and far-off values are the buffer's to refuse
+        finite = rows[(np.abs(translation[rows]) <= MAX_TRANSLATION_M).all(axis=1)]
     if finite.size >= 2:
         step_m = np.linalg.norm(np.diff(translation[finite], axis=0), axis=1)
         dt_s = np.diff(stamps_ns[finite]) / 1e9
@@ -256,7 +258,7 @@ def _second_stream(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> boo
         return True
     main = np.setdiff1d(np.arange(t.shape[0]), odd)
     nearest = main[np.clip(np.searchsorted(stamps_ns[main], stamps_ns[odd]), 0, main.size - 1)]
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         to_main = float(np.nanmedian(np.linalg.norm(t[odd] - t[nearest], axis=1)))
         along = float(np.nanmedian(np.linalg.norm(np.diff(t[odd], axis=0), axis=1)))
     return along < 0.25 * to_main
@@ -264,7 +266,7 @@ def _second_stream(stamps_ns: np.ndarray, t: np.ndarray, odd: np.ndarray) -> boo
 
 def _alternating(t: np.ndarray) -> bool:
     """Two publishers taking turns: the path zig-zags far more than its even and odd samples each move."""
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         whole = float(np.nansum(np.linalg.norm(np.diff(t, axis=0), axis=1)))
         halves = sum(float(np.nansum(np.linalg.norm(np.diff(t[k::2], axis=0), axis=1))) for k in (0, 1))
     return whole > 1.0 and whole > 4.0 * halves

@@ -132,3 +132,46 @@ def test_empty_and_all_nan_clouds_are_counted(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["clouds_used"] == 1 and summary["clouds_skipped"] == {"empty cloud": 2}
     assert summary["points_out"] == 100
+
+
+def _far_tf_bag(tmp_path: Path, where: str, axis: int, value: float) -> Path:
+    """The robustness scene (3 s) with every transform of one edge ``value`` metres off on ``axis``."""
+    from tests.robustness.scene import make_scene
+
+    scene = make_scene(duration_s=3.0)
+    topic, child = {"odom": ("/tf", "base_link"), "map": ("/tf", "odom"), "camera": ("/tf_static", "camera_link")}[where]
+    for entry in scene.of(topic):
+        for tf in entry.item:
+            if tf.child == child:
+                xyz = list(tf.xyz)
+                xyz[axis] = value
+                tf.xyz = tuple(xyz)
+    return scene.write(tmp_path / f"far_{where}_{axis}_{value:g}")
+
+
+@pytest.mark.parametrize("where, axis, value", [
+    ("odom", 2, 1e30),      # the side view's rows collapse to one height: matplotlib's singular axes
+    ("camera", 2, 1e30),    # the same through a /tf_static mount
+    ("odom", 0, 1e300),     # float32 points overflow to inf: a NaN raster size
+    ("map", 0, -1e30),      # a localizer's map -> odom
+])
+@pytest.mark.parametrize("command", ["map-cloud", "grid"])
+def test_a_far_off_tf_translation_is_said_not_an_internal_error(tmp_path: Path, capsys, command: str, where: str,
+                                                                axis: int, value: float) -> None:
+    """A tf translation of 1e30 m on every sample of an edge (too persistent to be a spike) used to end map-cloud in
+    the picture and grid in the raster as an internal error: now it is a one-line error or a warning."""
+    from bagtools.cli import main
+
+    bag = _far_tf_bag(tmp_path, where, axis, value)
+    argv = [command, str(bag), "--out", str(tmp_path / "out")] + (["--topic", "/scan"] if command == "grid" else [])
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    err = capsys.readouterr().err
+    assert "internal error" not in err and "Traceback" not in err, err
+    lines = [line for line in err.strip().splitlines() if line]
+    assert all(line.startswith("bagtools: ") for line in lines), err
+    if exit_info.value.code == 2:
+        errors = [line for line in lines if not line.startswith("bagtools: warning: ")]
+        assert len(errors) == 1 and str(bag) in errors[0], err
+    else:
+        assert exit_info.value.code == 0 and any("beyond" in line for line in lines), err

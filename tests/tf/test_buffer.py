@@ -358,6 +358,8 @@ def test_unknown_frames_raise_lookup_exception_naming_known_ones() -> None:
     ((math.nan, 0, 0), IDENTITY_Q, "NaN"),
     ((0, 0, 0), (0, 0, 0, 0), "not normalized"),
     ((0, 0, 0), (0, 0, 0, 1.02), "not normalized"),
+    ((0, 0, 1e30), IDENTITY_Q, "beyond 1e\\+09 m"),
+    ((-3.4e38, 0, 0), IDENTITY_Q, "beyond 1e\\+09 m"),
 ])
 def test_invalid_transforms_are_rejected(translation, rotation, match) -> None:
     buf = TfBuffer()
@@ -395,6 +397,30 @@ def test_invalid_rows_skipped_when_loading_with_skip_invalid() -> None:
     buf = TfBuffer.from_arrays(arrays, None, skip_invalid=True)
     assert buf.frame_time_range("base") == (0, 0)
     assert len(buf.warnings) == 2 and "NaN" in buf.warnings[0] + buf.warnings[1]
+
+
+def test_far_off_translations_are_skipped_when_loading_and_said_without_numpy_noise() -> None:
+    """1e30 m (or +-1e300 m) on every sample of an edge is too persistent to be a spike: the buffer refuses it as it
+    refuses a NaN (it collapsed map-cloud's picture and grid's raster to no extent: an internal error), and the
+    repairs before it do not overflow on it."""
+    import warnings
+
+    from bagtools.io import TfArrays
+
+    n = 20
+    far = np.zeros((n, 3))
+    far[: n // 2, 0], far[n // 2:, 0] = 1e300, -1e300
+    arrays = TfArrays(np.full(n, "odom", dtype=object), np.full(n, "base", dtype=object), np.arange(n) * S // 10,
+                      far, np.tile(IDENTITY_Q, (n, 1)))
+    static = TfArrays(np.array(["base"], dtype=object), np.array(["camera"], dtype=object), np.array([0]),
+                      np.array([[0.0, 0.0, 1e30]]), np.array([IDENTITY_Q]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        buf = TfBuffer.from_arrays(arrays, static, skip_invalid=True, repair_spikes=True)
+    assert not buf.has_frame("camera") and not buf.has_frame("odom")
+    assert any("translation beyond 1e+09 m" in w for w in buf.warnings), buf.warnings
+    assert not any("jumps" in w for w in buf.warnings), buf.warnings
+    assert "beyond 1e+09 m" in buf.invalid_note("base")
 
 
 def test_loop_in_tree_is_a_lookup_exception() -> None:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from bagtools.io import TfArrays
+from bagtools.tf import InvalidArgumentException
 from bagtools.tf.repair import inspect_edge, repair_dynamic_tf, tf_conflicts, translation_spike_mask
 
 T0 = 1_700_000_000_000_000_000
@@ -46,14 +48,18 @@ def test_from_arrays_repairs_only_when_asked() -> None:
 
     n = 20
     xyz = np.column_stack([np.arange(n) * 0.02, np.zeros(n), np.zeros(n)])
-    xyz[7, 0] = 1e30
+    xyz[7, 0] = 1e6   # a leap the buffer takes (1e30 m it refuses as invalid, repaired or not: below)
     arrays = TfArrays(np.array(["odom"] * n, dtype=object), np.array(["base"] * n, dtype=object),
                       T0 + np.arange(n, dtype=np.int64) * S // 10, xyz, np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
     raw = TfBuffer.from_arrays(arrays)
-    assert raw.lookup("odom", "base", int(arrays.stamp_ns[7]))[0, 3] == 1e30
+    assert raw.lookup("odom", "base", int(arrays.stamp_ns[7]))[0, 3] == 1e6
     repaired = TfBuffer.from_arrays(arrays, repair_spikes=True)
     assert abs(repaired.lookup("odom", "base", int(arrays.stamp_ns[7]))[0, 3] - 0.14) < 1e-9
     assert repaired.warnings == ["dropped 1 corrupt /tf samples odom -> base (translation leaping away from its neighbours and back)"]
+    arrays.translation[7, 0] = 1e30
+    with pytest.raises(InvalidArgumentException, match="translation beyond 1e\\+09 m"):
+        TfBuffer.from_arrays(arrays)
+    assert TfBuffer.from_arrays(arrays, repair_spikes=True).warnings == repaired.warnings
 
 
 def edge(xyz: np.ndarray, yaw: np.ndarray | None = None, stamps: np.ndarray | None = None,
