@@ -15,7 +15,13 @@ system would:
    ``optimize_every`` keyframes after a smaller one; afterwards each loop's
    squared Mahalanobis residual is checked against ``outlier_chi2`` (scaled by
    the loops' median residual, see :meth:`_Builder.outlier_gate`), and the
-   worst loop above it is dropped and the graph optimized again, until none is.
+   worst loop above it that no other accepted loop supports is dropped and the
+   graph optimized again, until none is. A loop is supported when another,
+   from scans it does not share, closes a consistent cycle with it through the
+   two short chains between them: two such matches are evidence against the
+   long odometry chain, whose systematic drift (a heading bias, a scale error)
+   its covariances do not know, so that a loop correcting that drift has a
+   large residual for the chain's fault, not its own.
    Later searches use the corrected estimate.
 4. when no loop has been accepted for a while, a global search (see
    :mod:`bagtools.slam.constraints`) matches the keyframe against old maps
@@ -281,15 +287,29 @@ class _Builder:
             scale = max(1.0, float(np.median(chi2)) / CHI2_3DOF_MEDIAN)
         return self.options.outlier_chi2 * scale
 
+    def _supported(self, loop: Constraint) -> bool:
+        """Does another accepted loop, from a new map sharing no keyframe with this one's, agree with it (the
+        cycle through the two short chains closes)? Such a pair is two pieces of evidence against the long
+        odometry chain, whose drift the chi2 does not know."""
+        if self.check is None:
+            return False
+        cands = [c for c in self.check.accepted if c.old == loop.i and c.new == loop.j]
+        return bool(cands) and self.check.supported(cands[0], self.graph.poses)
+
     def _optimize(self, node: int) -> None:
         """Optimize; then drop the worst loop above the chi2 gate and optimize again, until none is."""
         self.optimizations.append(self.graph.optimize())
         for _ in range(self.options.max_outlier_rounds):
             loops, chi2 = self.graph.loop_chi2()
-            if not loops or chi2.max() <= self.outlier_gate(chi2):
+            if not loops:
                 break
-            worst = self.graph.constraints[loops[int(np.argmax(chi2))]]
-            self.graph.remove([loops[int(np.argmax(chi2))]])
+            gate = self.outlier_gate(chi2)
+            above = [k for k in np.argsort(-chi2, kind="stable") if chi2[k] > gate]
+            drop = next((k for k in above if not self._supported(self.graph.constraints[loops[k]])), None)
+            if drop is None:
+                break
+            worst = self.graph.constraints[loops[drop]]
+            self.graph.remove([loops[drop]])
             self._edges = []  # the graph distances are rebuilt from the remaining constraints
             for cand in self.check.accepted:
                 if cand.old == worst.i and cand.new == worst.j and cand.status == ACCEPTED:

@@ -540,6 +540,10 @@ class ConsistencyCheck:
         self.pending = [p for p in self.pending if p.status == PENDING]
         return now
 
+    def supported(self, cand: LoopCandidate, poses: np.ndarray) -> bool:
+        """Is another accepted match pairwise consistent with ``cand`` at the estimate ``poses``?"""
+        return any(p is not cand and self._pair_consistent(cand, p, poses) for p in self.accepted)
+
     def _pair_consistent(self, a: LoopCandidate, b: LoopCandidate, poses: np.ndarray) -> bool:
         """Does the cycle a.old -> a.new -> b.new -> b.old -> a.old close within the gate?"""
         o = self.options

@@ -77,6 +77,27 @@ def test_match_recovers_the_true_relative_pose_from_a_wrong_guess(figure8_bag, f
     assert missed.T_old_new is None or np.hypot(*se2_between(truth_rel, missed.T_old_new)[:2]) > 0.2
 
 
+def test_global_match_finds_the_place_whatever_the_estimate_says(figure8_bag, figure8_front) -> None:
+    """The estimate puts the newest keyframe 3.6 m and 34 degrees off: the local search's window (sized by an
+    uncertainty that does not know the error) misses the truth; the global search over the old maps finds it."""
+    _, truth = true_poses_at_scans(figure8_bag)
+    kf = np.array(figure8_front.keyframe_indexes)
+    poses = truth[kf]
+    search = _search_over(figure8_front, poses)
+    new = len(kf) - 1
+    drifted = _drifted(poses, new, [3.0, -2.0, 0.6])
+    old = search.candidates(new, poses, np.asarray(search.path_m[new]) - np.asarray(search.path_m), [])[0]
+    local = search.match(old, new, drifted, (0.15, 0.05))
+    truth_rel = se2_between(poses[old], poses[new])
+    assert local.T_old_new is None or np.hypot(*se2_between(truth_rel, local.T_old_new)[:2]) > 0.5
+    tiles = search.global_tiles(new, drifted)
+    found = [search.match(a, new, drifted, (0.0, 0.0), kind=GLOBAL) for a in tiles]
+    assert all(c.kind == GLOBAL and np.allclose(c.window, [4.0, 4.0, np.pi]) for c in found)
+    best = max((c for c in found if c.T_old_new is not None), key=lambda c: c.score)
+    err = se2_between(se2_between(poses[best.old], poses[new]), best.T_old_new)
+    assert best.score >= 0.6 and np.hypot(err[0], err[1]) < 0.05 and abs(err[2]) < 0.02, (best.score, err)
+
+
 def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
     return LoopCandidate(old, new, guess, np.array([1.0, 1.0, 0.3]), sigma, T, np.eye(3) * 1e-4, 0.8)
 
@@ -128,6 +149,27 @@ def test_a_global_match_needs_a_follow_up_and_is_not_gated_by_the_estimate() -> 
                            kind=FOLLOW_UP)
     assert set(map(id, check.review(follow, poses))) == {id(found), id(follow)}
     assert found.status == ACCEPTED and not check.pending_global()
+
+
+def test_a_loop_is_supported_by_a_consistent_loop_from_other_scans() -> None:
+    poses = np.zeros((30, 3))
+    poses[:10, 0] = np.arange(10)
+    poses[20:, 0] = np.arange(10)
+    path = list(np.arange(30, dtype=float) * 1.0)
+    check = ConsistencyCheck(LoopOptions(), path)
+    same = np.zeros(3)
+    first = _cand(2, 22, same, same, (0.05, 0.01))
+    check.review(first, poses)
+    assert not check.supported(first, poses)  # alone
+    near = _cand(3, 23, same, same, (0.05, 0.01))  # its new map shares keyframes with the first's: no support
+    check.review(near, poses)
+    assert not check.supported(first, poses)
+    far_wrong = _cand(8, 28, np.array([3.0, 0.0, 0.0]), np.array([3.0, 0.0, 0.0]), (0.6, 0.1))
+    check.accepted.append(far_wrong)  # as if accepted earlier: 3 m off, beyond the cycle gate (1.5 m over these 12 m of chain)
+    assert not check.supported(first, poses)
+    far = _cand(8, 28, same, same, (0.05, 0.01))
+    check.review(far, poses)
+    assert check.supported(first, poses) and check.supported(far, poses)
 
 
 def test_global_tiles_cover_the_old_path_once_per_tile() -> None:

@@ -17,7 +17,7 @@ from bagtools.errors import BagtoolsError, TopicError
 from bagtools.grid import read_nav2_map
 from bagtools.ndtodom.steps import FrontEndRun
 from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, align_se2, build_pose_graph, write_slam
-from bagtools.slam.constraints import ACCEPTED, FOLLOW_UP, GLOBAL
+from bagtools.slam.constraints import ACCEPTED
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
@@ -122,21 +122,21 @@ def test_real_csail_log_loops_are_right(csail_odom: Path) -> None:
 
 
 
-def test_real_csail_log_global_search_finds_loops_the_estimate_cannot(csail_odom: Path) -> None:
-    """A heading bias of 0.57 degrees per metre puts the estimate 21 m off (aligned RMSE) where the robot comes
-    back: no local window reaches the truth there. The global search matches old maps anywhere; what it lets
-    into the graph (after a follow-up or an accepted loop agreed) is right."""
+def test_real_csail_log_loops_that_correct_a_heading_bias_are_kept(csail_odom: Path) -> None:
+    """The odometry's covariances do not know its bias (0.57 degrees per metre here), so the loops that correct
+    it keep large residuals: dropping each as an outlier left the map 11 m off (aligned RMSE). A loop that
+    another loop from other scans agrees with is kept: 2.5 m. Of the loops kept, nearly all are right."""
     drift = Drift(scale=0.01, heading_bias_rad_per_m=0.01, noise_m=0.01, noise_rad=0.004)
     front = front_end_from_truth(csail_odom, drift=drift)
     back = build_pose_graph(front.steps, SlamOptions().back_end_options())
     _, truth = true_poses_at_scans(csail_odom)
     truth = truth[back.keyframe_steps]
-    found = [c for c in back.candidates if c.kind in (GLOBAL, FOLLOW_UP) and c.T_old_new is not None]
-    assert back.counts["global searches"] >= 3 and found
-    errors = {c.status: [] for c in found}
-    for c in found:
-        errors[c.status].append(np.hypot(*se2_between(se2_between(truth[c.old], truth[c.new]), c.T_old_new)[:2]))
-    assert ACCEPTED in errors and max(errors[ACCEPTED]) < 0.3, errors
+    R, t = align_se2(back.graph.poses[:, :2], truth[:, :2])
+    rmse = float(np.sqrt(np.mean(np.sum((back.graph.poses[:, :2] @ R.T + t - truth[:, :2]) ** 2, axis=1))))
+    assert rmse < 4.0, rmse
+    loops = [c for c in back.graph.constraints if c.kind == "loop"]
+    errors = np.array([np.hypot(*se2_between(se2_between(truth[c.i], truth[c.j]), c.T_i_j)[:2]) for c in loops])
+    assert len(loops) >= 60 and np.median(errors) < 0.06 and (errors > 0.3).sum() <= 2, errors
 
 
 def test_real_csail_log_without_odometry_is_consistent(csail_odom: Path) -> None:
