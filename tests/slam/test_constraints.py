@@ -102,12 +102,17 @@ def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[flo
     return LoopCandidate(old, new, guess, np.array([1.0, 1.0, 0.3]), sigma, T, np.eye(3) * 1e-4, 0.8)
 
 
-def test_consistency_check() -> None:
-    # A straight corridor: keyframes 1 m apart along x, poses exact; old keyframes 0..9, new ones 20..29 on top.
+def _retraced_corridor() -> tuple[np.ndarray, list[float]]:
+    """A straight corridor, keyframes 1 m apart along x, poses exact: old keyframes 0..9, new ones 20..29 on top
+    of them. (poses (30,3), path_m)."""
     poses = np.zeros((30, 3))
     poses[:10, 0] = np.arange(10)
     poses[20:, 0] = np.arange(10)
-    path = list(np.arange(30, dtype=float) * 1.0)
+    return poses, list(np.arange(30, dtype=float) * 1.0)
+
+
+def test_consistency_check() -> None:
+    poses, path = _retraced_corridor()
     check = ConsistencyCheck(LoopOptions(), path)
     same = np.zeros(3)
     sure = _cand(2, 22, same, same, (0.05, 0.01))
@@ -152,10 +157,7 @@ def test_a_global_match_needs_a_follow_up_and_is_not_gated_by_the_estimate() -> 
 
 
 def test_a_loop_is_supported_by_a_consistent_loop_from_other_scans() -> None:
-    poses = np.zeros((30, 3))
-    poses[:10, 0] = np.arange(10)
-    poses[20:, 0] = np.arange(10)
-    path = list(np.arange(30, dtype=float) * 1.0)
+    poses, path = _retraced_corridor()
     check = ConsistencyCheck(LoopOptions(), path)
     same = np.zeros(3)
     first = _cand(2, 22, same, same, (0.05, 0.01))
