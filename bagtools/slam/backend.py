@@ -53,7 +53,8 @@ from scipy.sparse.csgraph import dijkstra
 from bagtools.ndtodom.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.slam.constraints import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch, LoopOptions,
+    ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch,
+    LoopOptions,
 )
 from bagtools.slam.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
@@ -227,25 +228,28 @@ class _Builder:
         self._follow_up(node, distance)
         last_loop = max((c.new for c in self.check.accepted), default=None)
         if self.search.global_due(node, last_loop):
-            self._global_search(node)
+            self._global_search(node, distance)
         self.check.expire(node)
         due = self._loops_since_optimization and node - self._last_optimization >= o.optimize_every
         if self.counts["large corrections"] or due:
             self._optimize(node)
 
-    def _global_search(self, node: int) -> None:
-        """Match ``node`` against old maps anywhere; the best match enters the graph when an accepted loop agrees
-        with it, and otherwise waits for a follow-up."""
+    def _global_search(self, node: int, distance: np.ndarray) -> None:
+        """Match ``node`` against old maps anywhere (``distance``: graph distances from ``node``, m); the best match
+        enters the graph when an accepted loop agrees with it, and otherwise waits for a follow-up."""
         self.counts["global searches"] += 1
         matches = []
         for old in self.search.global_tiles(node, self.graph.poses):
-            cand = self.search.match(old, node, self.graph.poses, (0.0, 0.0), kind=GLOBAL)
+            sigma_t, sigma_r = self.search.sigmas(distance[old])
+            cand = self.search.match(old, node, self.graph.poses, (float(sigma_t), float(sigma_r)), kind=GLOBAL)
             self.counts["global matches tried"] += 1
             if cand.T_old_new is not None:
                 matches.append(cand)
+            elif cand.status == LOOK_ALIKE:
+                self.counts["global look-alikes refused"] += 1
         if matches:
             best = max(matches, key=lambda c: c.score)
-            self.candidates.append(best)
+            self.candidates.append(best)  # judged against the graph's drift model, then waits or is confirmed
             for c in self.check.review(best, self.graph.poses):  # confirmed at once by an accepted loop, or waits
                 self._add_loop(c)
 

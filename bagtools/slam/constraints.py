@@ -59,12 +59,19 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    map per ``global_tile_m`` of old path, the ``global_max_tiles`` nearest in
    the estimate at most, each searched over +- ``global_window_m`` around the
    old keyframe and every heading by the branch and bound, which
-   ``global_min_score`` prunes early. The best match waits (``PENDING``) for a
-   **follow-up**: each later keyframe whose new map shares none of its
-   keyframes is matched in a small window around where that match puts it (the
-   old chain, the match, the new chain); a follow-up at ``min_score`` that is
-   pairwise consistent confirms both. Nothing about a global match is checked
-   against the estimate: that is what it corrects.
+   ``global_min_score`` prunes early. A match is kept only if no other place
+   of its window (``global_separation_m``/``_rad`` away) scores
+   ``global_unique_ratio`` of it: a corridor or a symmetric room matches in
+   several places, a look-alike as well as the place. It is checked against
+   the estimate only loosely: it may correct it by up to
+   ``global_gate_sigmas`` of the drift model's uncertainty of the relative
+   pose (graph distance times the drift rates, as in step 1), which after a
+   long loop is metres and tens of degrees, but rules out a look-alike a few
+   metres from where a short stretch of path puts the robot. The best match
+   waits (``PENDING``) for a **follow-up**: each later keyframe whose new map
+   shares none of its keyframes is matched in a small window around where
+   that match puts it (the old chain, the match, the new chain); a follow-up
+   at ``min_score`` that is pairwise consistent confirms both.
 
 Every candidate is recorded as a :class:`LoopCandidate` with what happened to it.
 """
@@ -78,7 +85,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bagtools.ndt import CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid
+from bagtools.ndt import (
+    CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid, match_scans_grid_peaks,
+)
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 # Candidate outcomes (summary.json counts them).
@@ -92,6 +101,7 @@ OUTLIER = "outlier after optimization"
 # Candidate kinds: searched around the estimate, anywhere, or around a pending global match.
 LOCAL, GLOBAL, FOLLOW_UP = "local", "global", "follow-up"
 TOO_FEW_POINTS = "too few points"
+LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
 
 
 @dataclass(frozen=True)
@@ -134,16 +144,21 @@ class LoopOptions:
     global_window_m: float = 4.0
     global_min_score: float = 0.6
     global_max_tiles: int = 64
+    global_unique_ratio: float = 0.9
+    global_gate_sigmas: float = 5.0
+    global_separation_m: float = 1.0
+    global_separation_rad: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m",
                      "drift_rad_per_m", "loop_edge_m", "angular_reach_m", "gate_sigmas", "min_window_m", "min_window_rad",
                      "resolution_m", "max_range_m", "loop_spacing_m", "sure_sigma_m", "pair_max_path_m", "ndt_cell_m",
-                     "max_refine_m", "max_refine_rad", "global_after_m", "global_tile_m", "global_window_m"):
+                     "max_refine_m", "max_refine_rad", "global_after_m", "global_tile_m", "global_window_m",
+                     "global_separation_m", "global_separation_rad", "global_gate_sigmas"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name in ("min_score", "global_min_score"):
+        for name in ("min_score", "global_min_score", "global_unique_ratio"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
         for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size", "global_max_tiles"):
@@ -478,8 +493,18 @@ class LoopClosureSearch:
         old_map = self._old_map(old, poses, cache=kind != GLOBAL)
         current = self._new_map(new, poses)
         reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
-        grid = match_scans_grid(current, old_map.correlative, initial_pose=guess, search_range=window,
-                                angular_resolution_rad=self.angular_step(reach), min_score=min_score)
+        search = dict(initial_pose=guess, search_range=window, angular_resolution_rad=self.angular_step(reach),
+                      min_score=min_score)
+        if kind == GLOBAL:  # anywhere in the map: the place must be the window's one good match
+            peaks = match_scans_grid_peaks(current, old_map.correlative, max_peaks=2, min_ratio=o.global_unique_ratio,
+                                           separation=(o.global_separation_m, o.global_separation_rad), **search)
+            grid = peaks[0] if peaks else match_scans_grid(current, old_map.correlative, **search)
+            if len(peaks) > 1:
+                cand.score, cand.status = float(grid.score), LOOK_ALIKE
+                cand.time_s = time.perf_counter() - t0
+                return cand
+        else:
+            grid = match_scans_grid(current, old_map.correlative, **search)
         if not grid.ok:
             cand.status = TOO_FEW_POINTS if "too few" in grid.reason else LOW_SCORE
             cand.time_s = time.perf_counter() - t0
@@ -510,18 +535,23 @@ class ConsistencyCheck:
         self.pending: list[LoopCandidate] = []
         self.accepted: list[LoopCandidate] = []
 
-    def gate(self, sigma: tuple[float, float]) -> tuple[float, float]:
-        """Largest disagreement (m, rad) with an estimate of uncertainty ``sigma`` that passes."""
+    def gate(self, sigma: tuple[float, float], sigmas: float | None = None) -> tuple[float, float]:
+        """Largest disagreement (m, rad) with an estimate of uncertainty ``sigma`` that passes, at ``sigmas``
+        (default ``gate_sigmas``) of it."""
         o = self.options
-        return (o.gate_sigmas * sigma[0] + 2 * o.resolution_m,
-                o.gate_sigmas * sigma[1] + 2 * o.resolution_m / o.angular_reach_m)
+        k = o.gate_sigmas if sigmas is None else sigmas
+        return (k * sigma[0] + 2 * o.resolution_m, k * sigma[1] + 2 * o.resolution_m / o.angular_reach_m)
 
     def review(self, cand: LoopCandidate, poses: np.ndarray) -> list[LoopCandidate]:
         """Judge a matched candidate against the estimate ``poses``; returns the candidates accepted now."""
         o = self.options
-        residual = se2_between(cand.guess, cand.T_old_new)
-        gate_t, gate_r = self.gate(cand.sigma)
-        if cand.kind != GLOBAL and (np.hypot(residual[0], residual[1]) > gate_t or abs(residual[2]) > gate_r):
+        if cand.kind == GLOBAL:  # the estimate may be off by what the drift model allows, given a wide margin
+            residual = se2_between(se2_between(poses[cand.old], poses[cand.new]), cand.T_old_new)
+            gate_t, gate_r = self.gate(cand.sigma, o.global_gate_sigmas)
+        else:
+            residual = se2_between(cand.guess, cand.T_old_new)
+            gate_t, gate_r = self.gate(cand.sigma)
+        if np.hypot(residual[0], residual[1]) > gate_t or abs(wrap_to_pi(residual[2])) > gate_r:
             cand.status = INCONSISTENT
             return []
         if cand.kind == LOCAL and cand.sigma[0] <= o.sure_sigma_m:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bagtools.slam.constraints import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, PENDING, UNCONFIRMED, ConsistencyCheck, LoopCandidate,
+    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOOK_ALIKE, PENDING, UNCONFIRMED, ConsistencyCheck, LoopCandidate,
     LoopClosureSearch, LoopOptions, voxel_subsample,
 )
 from bagtools.transforms import se2_between, se2_compose
@@ -98,6 +98,38 @@ def test_global_match_finds_the_place_whatever_the_estimate_says(figure8_bag, fi
     assert best.score >= 0.6 and np.hypot(err[0], err[1]) < 0.05 and abs(err[2]) < 0.02, (best.score, err)
 
 
+def _corridor_search(junction: bool) -> tuple[LoopClosureSearch, np.ndarray]:
+    """Keyframes 1 m apart along a 3 m wide corridor (walls at y = +-1.5 m, seen to 8 m), driven twice: keyframes
+    0..19 and 20..39 over the same x. With ``junction``, a hall opening off it at x = 10..14 tells the places apart."""
+    wall_x = np.arange(-5.0, 30.0, 0.05)
+    left = wall_x if not junction else wall_x[(wall_x < 10.0) | (wall_x > 14.0)]
+    world = [np.c_[left, np.full_like(left, 1.5)], np.c_[wall_x, np.full_like(wall_x, -1.5)]]
+    if junction:  # the left wall opens at x = 10..14 into a hall (walls x = 10, y = 6, and x = 14 up to y = 4)
+        y, x, y2 = np.arange(1.5, 6.0, 0.05), np.arange(10.0, 14.0, 0.05), np.arange(1.5, 4.0, 0.05)
+        world += [np.c_[np.full_like(y, 10.0), y], np.c_[x, np.full_like(x, 6.0)], np.c_[np.full_like(y2, 14.0), y2]]
+    world = np.vstack(world)
+    xs = np.r_[np.arange(20.0), np.arange(20.0)]
+    poses = np.c_[xs, np.zeros(40), np.zeros(40)]
+    search = LoopClosureSearch(LoopOptions())
+    for k, x in enumerate(xs):
+        seen = world[np.abs(world[:, 0] - x) < 8.0] - [x, 0.0]
+        search.add_keyframe(seen, None if k == 0 else np.array([1.0, 0.0, 0.0]))
+    return search, poses
+
+
+@pytest.mark.parametrize("junction", [False, True])
+def test_a_global_match_in_a_corridor_is_a_look_alike(junction: bool) -> None:
+    """A plain corridor matches all along itself (and turned around): the global search refuses it; at a
+    junction the place is found."""
+    search, poses = _corridor_search(junction)
+    cand = search.match(10, 30, poses, (0.0, 0.0), kind=GLOBAL)
+    if not junction:
+        assert cand.status == LOOK_ALIKE and cand.T_old_new is None
+    else:
+        assert cand.status != LOOK_ALIKE and cand.T_old_new is not None
+        assert np.hypot(*cand.T_old_new[:2]) < 0.05 and abs(cand.T_old_new[2]) < 0.01
+
+
 def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
     return LoopCandidate(old, new, guess, np.array([1.0, 1.0, 0.3]), sigma, T, np.eye(3) * 1e-4, 0.8)
 
@@ -134,7 +166,7 @@ def test_consistency_check() -> None:
     assert aliased.status == UNCONFIRMED
 
 
-def test_a_global_match_needs_a_follow_up_and_is_not_gated_by_the_estimate() -> None:
+def test_a_global_match_is_gated_loosely_by_the_drift_model_and_needs_a_follow_up() -> None:
     # The estimate puts the new pass (keyframes 20..29) 8 m and 40 degrees away from the old one it retraces.
     poses = np.zeros((30, 3))
     poses[:10, 0] = np.arange(10)
@@ -142,7 +174,12 @@ def test_a_global_match_needs_a_follow_up_and_is_not_gated_by_the_estimate() -> 
     path = list(np.arange(30, dtype=float) * 1.0)
     check = ConsistencyCheck(LoopOptions(), path)
     same = np.zeros(3)
-    found = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (0.0, 0.0), same, np.eye(3) * 1e-4, 0.8,
+    # after a short stretch of path (drift model: 0.3 m, 0.1 rad) 8.5 m and 40 degrees is a look-alike, not drift
+    near = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (0.3, 0.1), same, np.eye(3) * 1e-4, 0.8,
+                         kind=GLOBAL)
+    assert check.review(near, poses) == [] and near.status == INCONSISTENT
+    # after a long loop (drift model: 3 m, 0.5 rad) it is a correction within 5 sigmas
+    found = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (3.0, 0.5), same, np.eye(3) * 1e-4, 0.8,
                           kind=GLOBAL)
     assert check.review(found, poses) == [] and found.status == PENDING and check.pending_global() == [found]
     # a sure local match elsewhere does not confirm it; a follow-up where it puts keyframe 28 does
