@@ -37,6 +37,10 @@ YAML_OCCUPIED_THRESH = 0.65
 YAML_FREE_THRESH = 0.196
 
 
+#: A map picture's raster holds at most this many pixels a side: larger maps pool cells (see grey_pixels).
+MAX_PICTURE_PX = 2000
+
+
 def _fmt(x: float) -> str:
     """A float for YAML: rounded to 1e-9, shortest repr, never '-0.0'."""
     value = round(float(x), 9) + 0.0
@@ -286,17 +290,18 @@ def render_map_png(
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    probabilities = grid.occupancy_matrix("probability")
     x0, x1 = grid.x_world_limits
     y0, y1 = grid.y_world_limits
-    rows, cols = probabilities.shape
+    rows, cols = grid.grid_size
     aspect = rows / cols
     width_in = 8.0
     fig = Figure(figsize=(width_in, min(max(width_in * aspect, 3.0), 16.0) + 0.8), dpi=dpi)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-    ax.imshow(probabilities, cmap="gray_r", vmin=0.0, vmax=1.0, origin="upper",
-              extent=(x0, x1, y0, y1), interpolation="nearest")
+    # grey bytes, pooled to about the picture's resolution: no colour mapping of millions of float cells
+    grey, _ = grey_pixels(grid.occupancy_matrix("probability"), MAX_PICTURE_PX)
+    ax.imshow(np.repeat(grey[:, :, None], 3, axis=2), origin="upper", extent=(x0, x1, y0, y1),
+              interpolation="nearest")
     if trajectory_xy is not None:
         traj = _trajectory(trajectory_xy)
         if traj.shape[0]:
@@ -314,6 +319,26 @@ def render_map_png(
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return buf.getvalue()
+
+
+def grey_pixels(probability: np.ndarray, max_px: int) -> tuple[np.ndarray, int]:
+    """(grey (R, C) uint8: 255 free, 0 occupied; the cells per pixel k) of a probability matrix, for a picture
+    at most ``max_px`` pixels a side: k x k blocks of cells become one pixel, the darkest of them (a wall one
+    cell thick stays visible). ``probability`` is overwritten (it is the caller's scratch copy)."""
+    k = max(1, -(-max(probability.shape) // max_px))
+    np.subtract(1.0, probability, out=probability)
+    probability *= 255.0
+    np.rint(probability, out=probability)
+    rows, cols = probability.shape
+    if k == 1:
+        return probability.astype(np.uint8), 1
+    grey = np.full((-(-rows // k), -(-cols // k)), 255, dtype=np.uint8)
+    for r in range(k):  # the minimum over each block, one block offset at a time (no k^2 x temporary)
+        for c in range(k):
+            part = probability[r::k, c::k].astype(np.uint8)
+            view = grey[:part.shape[0], :part.shape[1]]
+            np.minimum(view, part, out=view)
+    return grey, k
 
 
 def _trajectory(trajectory_xy: np.ndarray) -> np.ndarray:

@@ -254,7 +254,11 @@ class OccupancyGrid:
     def occupancy_matrix(self, kind: str = "probability") -> np.ndarray:
         """The whole grid, row 0 at the top: probabilities (float64), or with
         kind='ternary' the int8 classes 1 occupied / 0 free / -1 unknown."""
-        p = 1.0 / (1.0 + np.exp(-self._log_odds.astype(np.float64)))
+        p = self._log_odds.astype(np.float64)  # the one full-size array: 1 / (1 + exp(-l)) computed in place
+        np.negative(p, out=p)
+        np.exp(p, out=p)
+        p += 1.0
+        np.reciprocal(p, out=p)
         if kind == "probability":
             return p
         if kind == "ternary":

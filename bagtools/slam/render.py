@@ -7,6 +7,7 @@ import io
 import numpy as np
 
 from bagtools.grid import OccupancyGrid
+from bagtools.grid.mapio import MAX_PICTURE_PX, grey_pixels
 
 #: Metres of map kept around the occupied cells and the trajectory in the picture.
 MARGIN_M = 2.0
@@ -19,10 +20,11 @@ def _view(grid: OccupancyGrid, probability: np.ndarray, trajectory_xy: np.ndarra
     """
     x0, x1 = grid.x_world_limits
     y0, y1 = grid.y_world_limits
-    occupied = np.argwhere(probability > grid.occupied_threshold)
+    occupied = probability > grid.occupied_threshold
+    rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
     pts = [trajectory_xy[np.isfinite(trajectory_xy).all(axis=1)]]
-    if occupied.size:
-        pts.append(grid.grid2world(occupied))
+    if rows.size:  # the occupied cells' bounding box
+        pts.append(grid.grid2world(np.array([[rows[0], cols[0]], [rows[-1], cols[-1]]])))
     xy = np.vstack(pts)
     if xy.size == 0:
         return x0, x1, y0, y1
@@ -47,11 +49,13 @@ def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_seg
     fig = Figure(figsize=(width_in, min(max(width_in * aspect, 4.0), 2.0 * width_in) + 0.8), dpi=dpi)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-    # Only the cells in view, as grey RGB bytes (no colour mapping of millions of cells by matplotlib).
+    # Only the cells in view, as grey RGB bytes pooled to about the picture's resolution (no colour mapping of
+    # millions of cells by matplotlib).
     (r0, c0), (r1, c1) = grid.world2grid(np.array([[x0, y1], [x1, y0]]))
     r0, c0 = max(int(r0), 0), max(int(c0), 0)
     r1, c1 = min(int(r1), grid.grid_size[0] - 1), min(int(c1), grid.grid_size[1] - 1)
-    grey = np.rint(255.0 * (1.0 - probability[r0:r1 + 1, c0:c1 + 1])).astype(np.uint8)
+    grey, _ = grey_pixels(probability[r0:r1 + 1, c0:c1 + 1], MAX_PICTURE_PX)
+    del probability  # the full-size matrix is not needed while the figure is drawn
     (left, top), (right, bottom) = grid.grid2world(np.array([[r0, c0], [r1, c1]]))
     half = 0.5 * grid.cell_size_m
     ax.imshow(np.repeat(grey[:, :, None], 3, axis=2), origin="upper", interpolation="nearest",
