@@ -143,7 +143,7 @@ class LoopOptions:
     global_tile_m: float = 4.0
     global_window_m: float = 4.0
     global_min_score: float = 0.6
-    global_max_tiles: int = 64
+    global_max_tiles: int = 32
     global_unique_ratio: float = 0.9
     global_gate_sigmas: float = 5.0
     global_separation_m: float = 1.0
