@@ -29,6 +29,8 @@ walk to the root reduces to.
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -216,6 +218,7 @@ class TfBuffer:
         self.warnings: list[str] = []      # transforms skipped by from_bag / from_arrays(skip_invalid=True)
         self.invalid_dropped: dict[str, int] = {}   # frame -> transforms of it skipped as invalid (NaN, far off, zero quaternion)
         self.bag_span_ns: tuple[int, int] | None = None   # (start_ns, end_ns) of the bag, set by from_bag
+        self._chains: dict[tuple[int, int], tuple[list[_Track], list[_Track]] | None] = {}  # one-stamp fast path
 
     # ------------------------------------------------------------------ loading
 
@@ -340,6 +343,7 @@ class TfBuffer:
             frame.static = static
             frame.chunks.append((stamps[rows], parent_ids[rows], rot[rows].T, trans[rows].T, frame.inserted))
             frame.inserted += 1
+        self._chains.clear()  # the tree may have changed
 
     def _id(self, name: str) -> int:
         frame_id = self._ids.get(name)
@@ -515,10 +519,69 @@ class TfBuffer:
         returns (T, valid) instead of raising for stamps without a transform:
         valid is a bool array shaped like the stamps and invalid rows are NaN.
         """
+        if not return_mask and isinstance(stamp_ns, (int, np.integer)) and not isinstance(stamp_ns, bool):
+            one = self._lookup_one(target, source, int(stamp_ns))
+            if one is not None:
+                return one
         q, t, valid, single, failure, ids = self._lookup_rigid(target, source, stamp_ns, "lookupTransform")
         n = valid.size
         matrices = _rigid.to_matrices((q, t), n)
         return self._finish(matrices, valid, single, failure, ids, return_mask)
+
+    # ------------------------------------------------------------------ one stamp
+
+    def _lookup_one(self, target: str, source: str, stamp_ns: int) -> np.ndarray | None:
+        """T_target_source (4,4) at one stamp on plain floats, or None where the batched path must decide (an
+        unknown or malformed frame, a parent that changes over time, no data at the stamp: it raises tf2's
+        errors). The same interpolation as :meth:`_Track.evaluate`, without the array machinery."""
+        chain = self._chain(target, source)
+        if chain is None:
+            return None
+        up_source, up_target = chain
+        a = _edges_one(up_source, stamp_ns)
+        b = _edges_one(up_target, stamp_ns)
+        if a is None or b is None:
+            return None
+        (qx, qy, qz, qw), t = _compose_one(_inverse_one(b), a)
+        xx, yy, zz, xy, xz, yz = qx * qx, qy * qy, qz * qz, qx * qy, qx * qz, qy * qz
+        wx, wy, wz = qw * qx, qw * qy, qw * qz
+        return np.array([[1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy), t[0]],
+                         [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx), t[1]],
+                         [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy), t[2]],
+                         [0.0, 0.0, 0.0, 1.0]])
+
+    def _chain(self, target: str, source: str) -> tuple[list[_Track], list[_Track]] | None:
+        """The tracks from ``source`` and from ``target`` up to their common ancestor, when every one has a
+        parent that never changes (cached until the buffer changes); None otherwise."""
+        target_id, source_id = self._ids.get(target), self._ids.get(source)
+        if target_id is None or source_id is None or target_id == source_id:
+            return None
+        key = (target_id, source_id)
+        if key in self._chains:
+            return self._chains[key]
+        paths = []
+        for start in (source_id, target_id):
+            frames, tracks, frame = [start], [], start
+            while True:
+                track = self._track(frame)
+                if track is None:
+                    break
+                parent = int(track.parent[0]) if track.static else track.only_parent
+                if parent < 0 or parent in frames or len(frames) > len(self._frames):
+                    frames = None
+                    break
+                frames.append(parent)
+                tracks.append(track)
+                frame = parent
+            if frames is None:
+                self._chains[key] = None
+                return None
+            paths.append((frames, tracks))
+        (s_frames, s_tracks), (t_frames, t_tracks) = paths
+        common = next((f for f in t_frames if f in s_frames), None)
+        chain = None if common is None else (s_tracks[:s_frames.index(common)], t_tracks[:t_frames.index(common)])
+        self._chains[key] = chain
+        return chain
 
     def lookup_pose(self, target: str, source: str, stamp_ns: int | np.ndarray | None = None,
                     return_mask: bool = False):
@@ -755,6 +818,66 @@ class TfBuffer:
                     f"but only time {format_stamp(track.first_ns)} is in the buffer")
         return cls(f"{text}, when looking up transform from frame [{self._frames[source_id].name}] "
                    f"to frame [{self._frames[target_id].name}]", self.path)
+
+
+def _edges_one(tracks: list[_Track], stamp_ns: int):
+    """T_top_start ((qx, qy, qz, qw), (x, y, z)) composed up ``tracks`` at one stamp; None without data there."""
+    acc = None
+    for track in tracks:
+        if track.static:
+            q, t = track.q[:, 0].tolist(), track.t[:, 0].tolist()
+        else:
+            m = track.stamps.size
+            if m == 1 or stamp_ns < track.stamps[0] or stamp_ns > track.stamps[-1]:
+                if m != 1 or stamp_ns != track.stamps[0]:
+                    return None
+                q, t = track.q[:, 0].tolist(), track.t[:, 0].tolist()
+            else:
+                j = min(max(int(np.searchsorted(track.stamps, stamp_ns, side="right")) - 1, 0), m - 2)
+                alpha = float(stamp_ns - int(track.stamps[j])) / float(track.duration[j])
+                theta = float(track.omega_over_pi[j])
+                w0 = (1.0 - alpha) * _sinc((1.0 - alpha) * theta) / _sinc(theta)
+                w1 = alpha * _sinc(alpha * theta) / _sinc(theta)
+                q0, q1 = track.q[:, j].tolist(), track.q_next[:, j].tolist()
+                t0, t1 = track.t[:, j].tolist(), track.t[:, j + 1].tolist()
+                q = [a * w0 + b * w1 for a, b in zip(q0, q1)]
+                t = [a * (1.0 - alpha) + b * alpha for a, b in zip(t0, t1)]
+        acc = (q, t) if acc is None else _compose_one((q, t), acc)
+    return acc if acc is not None else ([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0])
+
+
+def _sinc(x: float) -> float:
+    """numpy's sinc on one float: sin(pi x) / (pi x)."""
+    y = math.pi * (x if x != 0.0 else 1.0e-20)
+    return math.sin(y) / y
+
+
+def _quat_mul_one(a, b):
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+def _rotate_one(q, v):
+    qx, qy, qz, qw = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (qy * vz - qz * vy), 2.0 * (qz * vx - qx * vz), 2.0 * (qx * vy - qy * vx)
+    return (vx + qw * tx + (qy * tz - qz * ty), vy + qw * ty + (qz * tx - qx * tz), vz + qw * tz + (qx * ty - qy * tx))
+
+
+def _compose_one(a, b):
+    """a then b on plain floats, as :func:`bagtools.tf._rigid.compose`: T_x_z from T_x_y and T_y_z."""
+    (qa, ta), (qb, tb) = a, b
+    r = _rotate_one(qa, tb)
+    return _quat_mul_one(qa, qb), (r[0] + ta[0], r[1] + ta[1], r[2] + ta[2])
+
+
+def _inverse_one(a):
+    q, t = a
+    q_inv = (-q[0], -q[1], -q[2], q[3])
+    r = _rotate_one(q_inv, t)
+    return q_inv, (-r[0], -r[1], -r[2])
 
 
 def _as_stamps(stamp_ns, name: str) -> np.ndarray:

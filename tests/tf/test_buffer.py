@@ -469,3 +469,43 @@ def test_a_skipped_transform_is_named_as_text_not_as_a_numpy_repr() -> None:
     buf = TfBuffer.from_arrays(arrays, skip_invalid=True)
     assert len(buf.warnings) == 1 and "e.g. 'odom' -> 'base_link' at" in buf.warnings[0], buf.warnings
     assert "np.str_" not in buf.warnings[0]
+
+
+def test_one_stamp_lookups_equal_the_batched_path_and_fall_back_for_the_rest() -> None:
+    """An int stamp takes the one-stamp path (plain floats, a cached chain); it must give the batched path's
+    matrices, raise the same errors, fall back where a parent changes, and see transforms added later."""
+    rng = np.random.default_rng(5)
+    buf = TfBuffer()
+
+    def quats(n: int) -> np.ndarray:
+        q = rng.normal(size=(n, 4))
+        return q / np.linalg.norm(q, axis=1)[:, None]
+
+    buf.set_transform("map", "odom", np.arange(11) * S, rng.normal(size=(11, 3)), quats(11))
+    buf.set_transform("odom", "base", np.arange(31) * S // 3, rng.normal(size=(31, 3)), quats(31))
+    buf.set_transform("base", "laser", 0, (0.1, 0.0, 0.2), (0.0, 0.0, 0.0, 1.0), static=True)
+    buf.set_transform("base", "arm", 5 * S, (0.0, 0.3, 0.0), IDENTITY_Q)  # one sample only
+    # "hand" changes parent at 4 s: the one-stamp path must leave it to the batched path
+    buf.set_transform(["base", "base", "laser", "laser"], "hand", np.array([0, 3, 4, 9]) * S,
+                      rng.normal(size=(4, 3)), quats(4))
+    stamps = np.r_[np.sort(rng.integers(0, 10 * S, 300)), 0, 10 * S, 5 * S]
+    for target, source in [("map", "laser"), ("laser", "map"), ("odom", "laser"), ("laser", "base"),
+                           ("map", "hand"), ("arm", "laser"), ("map", "base")]:
+        ok = buf.can_transform(target, source, stamps)
+        batched = buf.lookup(target, source, stamps[ok])
+        one = np.array([buf.lookup(target, source, int(s)) for s in stamps[ok]])
+        assert np.abs(one - batched).max() <= 1e-12, (target, source)
+        for s in stamps[~ok][:5]:
+            with pytest.raises(ExtrapolationException):
+                buf.lookup(target, source, int(s))
+            with pytest.raises(ExtrapolationException):
+                buf.lookup(target, source, np.array([s]))
+    for s in (-1, 11 * S):
+        with pytest.raises(ExtrapolationException, match="extrapolation"):
+            buf.lookup("map", "laser", s)
+    # np.int64 stamps too; and a transform set later is seen (the cached chain is dropped)
+    before = buf.lookup("laser", "map", np.int64(2 * S))
+    buf.set_transform("base", "laser", 0, (0.5, 0.0, 0.2), (0.0, 0.0, 0.0, 1.0), static=True)
+    after = buf.lookup("laser", "map", np.int64(2 * S))
+    assert not np.allclose(before, after)
+    assert np.allclose(after, buf.lookup("laser", "map", np.array([2 * S]))[0], atol=1e-12)
