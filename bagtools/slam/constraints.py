@@ -86,7 +86,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.ndt import (
-    CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid, match_scans_grid_peaks,
+    MIN_SCAN_POINTS, CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid,
+    match_scans_grid_peaks,
 )
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
@@ -387,7 +388,8 @@ class LoopClosureSearch:
 
     def global_due(self, new: int, last_loop_new: int | None) -> bool:
         """Is a global search due at keyframe ``new``? Yes once ``global_after_m`` of path has passed since both
-        the last accepted loop (its new keyframe ``last_loop_new``, None for none) and the last global search."""
+        the last accepted loop (its new keyframe ``last_loop_new``, None for none) and the last global search;
+        a yes counts as that search (the next one is due ``global_after_m`` later)."""
         o = self.options
         path = self.path_m
         since_loop = path[new] - (path[last_loop_new] if last_loop_new is not None else 0.0)
@@ -498,11 +500,13 @@ class LoopClosureSearch:
         if kind == GLOBAL:  # anywhere in the map: the place must be the window's one good match
             peaks = match_scans_grid_peaks(current, old_map.correlative, max_peaks=2, min_ratio=o.global_unique_ratio,
                                            separation=(o.global_separation_m, o.global_separation_rad), **search)
-            grid = peaks[0] if peaks else match_scans_grid(current, old_map.correlative, **search)
-            if len(peaks) > 1:
-                cand.score, cand.status = float(grid.score), LOOK_ALIKE
+            if len(peaks) != 1:  # none: nothing scores global_min_score (the search is not run again for why)
+                too_few = min(len(current), old_map.correlative.n_points) < MIN_SCAN_POINTS
+                cand.status = LOOK_ALIKE if peaks else TOO_FEW_POINTS if too_few else LOW_SCORE
+                cand.score = float(peaks[0].score) if peaks else 0.0
                 cand.time_s = time.perf_counter() - t0
                 return cand
+            grid = peaks[0]
         else:
             grid = match_scans_grid(current, old_map.correlative, **search)
         if not grid.ok:

@@ -29,8 +29,6 @@ walk to the root reduces to.
 
 from __future__ import annotations
 
-import math
-
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,6 +133,22 @@ class _Track:
         q = self.q[:, j] * w0 + self.q_next[:, j] * w1
         t = self.t[:, j] * (1.0 - alpha) + self.t[:, j + 1] * alpha
         return parent, (q, t), fail
+
+
+    def at(self, stamp_ns: int) -> tuple[list[float], list[float]] | None:
+        """T_parent_child (q, t) on plain floats at one stamp, as :meth:`evaluate` gives it for a track whose
+        parent never changes; None where :meth:`evaluate` reports a failure (no data at the stamp)."""
+        m = self.stamps.size
+        if self.static or (m == 1 and stamp_ns == self.stamps[0]):
+            return self.q[:, 0].tolist(), self.t[:, 0].tolist()
+        if m == 1 or stamp_ns < self.stamps[0] or stamp_ns > self.stamps[-1]:
+            return None
+        j = min(max(int(np.searchsorted(self.stamps, stamp_ns, side="right")) - 1, 0), m - 2)
+        alpha = float(stamp_ns - int(self.stamps[j])) / float(self.duration[j])
+        w0, w1 = _rigid.slerp_weights_one(alpha, float(self.omega_over_pi[j]))
+        q0, q1 = self.q[:, j].tolist(), self.q_next[:, j].tolist()
+        t0, t1 = self.t[:, j].tolist(), self.t[:, j + 1].tolist()
+        return [a * w0 + b * w1 for a, b in zip(q0, q1)], [a * (1.0 - alpha) + b * alpha for a, b in zip(t0, t1)]
 
 
 def _is_sorted(stamps: np.ndarray) -> bool:
@@ -533,22 +547,15 @@ class TfBuffer:
     def _lookup_one(self, target: str, source: str, stamp_ns: int) -> np.ndarray | None:
         """T_target_source (4,4) at one stamp on plain floats, or None where the batched path must decide (an
         unknown or malformed frame, a parent that changes over time, no data at the stamp: it raises tf2's
-        errors). The same interpolation as :meth:`_Track.evaluate`, without the array machinery."""
+        errors). :meth:`_Track.at` and the scalar twins of :mod:`bagtools.tf._rigid`, without the array machinery."""
         chain = self._chain(target, source)
         if chain is None:
             return None
-        up_source, up_target = chain
-        a = _edges_one(up_source, stamp_ns)
-        b = _edges_one(up_target, stamp_ns)
+        a = _compose_up(chain[0], stamp_ns)
+        b = _compose_up(chain[1], stamp_ns)
         if a is None or b is None:
             return None
-        (qx, qy, qz, qw), t = _compose_one(_inverse_one(b), a)
-        xx, yy, zz, xy, xz, yz = qx * qx, qy * qy, qz * qz, qx * qy, qx * qz, qy * qz
-        wx, wy, wz = qw * qx, qw * qy, qw * qz
-        return np.array([[1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy), t[0]],
-                         [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx), t[1]],
-                         [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy), t[2]],
-                         [0.0, 0.0, 0.0, 1.0]])
+        return _rigid.matrix_one(_rigid.compose_one(_rigid.inverse_one(b), a))
 
     def _chain(self, target: str, source: str) -> tuple[list[_Track], list[_Track]] | None:
         """The tracks from ``source`` and from ``target`` up to their common ancestor, when every one has a
@@ -820,64 +827,16 @@ class TfBuffer:
                    f"to frame [{self._frames[target_id].name}]", self.path)
 
 
-def _edges_one(tracks: list[_Track], stamp_ns: int):
-    """T_top_start ((qx, qy, qz, qw), (x, y, z)) composed up ``tracks`` at one stamp; None without data there."""
-    acc = None
+def _compose_up(tracks: list[_Track], stamp_ns: int) -> tuple | None:
+    """T_top_start (q, t) on plain floats composed up ``tracks`` (start frame first) at one stamp; None where a
+    track has no data there."""
+    acc = ([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0])
     for track in tracks:
-        if track.static:
-            q, t = track.q[:, 0].tolist(), track.t[:, 0].tolist()
-        else:
-            m = track.stamps.size
-            if m == 1 or stamp_ns < track.stamps[0] or stamp_ns > track.stamps[-1]:
-                if m != 1 or stamp_ns != track.stamps[0]:
-                    return None
-                q, t = track.q[:, 0].tolist(), track.t[:, 0].tolist()
-            else:
-                j = min(max(int(np.searchsorted(track.stamps, stamp_ns, side="right")) - 1, 0), m - 2)
-                alpha = float(stamp_ns - int(track.stamps[j])) / float(track.duration[j])
-                theta = float(track.omega_over_pi[j])
-                w0 = (1.0 - alpha) * _sinc((1.0 - alpha) * theta) / _sinc(theta)
-                w1 = alpha * _sinc(alpha * theta) / _sinc(theta)
-                q0, q1 = track.q[:, j].tolist(), track.q_next[:, j].tolist()
-                t0, t1 = track.t[:, j].tolist(), track.t[:, j + 1].tolist()
-                q = [a * w0 + b * w1 for a, b in zip(q0, q1)]
-                t = [a * (1.0 - alpha) + b * alpha for a, b in zip(t0, t1)]
-        acc = (q, t) if acc is None else _compose_one((q, t), acc)
-    return acc if acc is not None else ([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0])
-
-
-def _sinc(x: float) -> float:
-    """numpy's sinc on one float: sin(pi x) / (pi x)."""
-    y = math.pi * (x if x != 0.0 else 1.0e-20)
-    return math.sin(y) / y
-
-
-def _quat_mul_one(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def _rotate_one(q, v):
-    qx, qy, qz, qw = q
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (qy * vz - qz * vy), 2.0 * (qz * vx - qx * vz), 2.0 * (qx * vy - qy * vx)
-    return (vx + qw * tx + (qy * tz - qz * ty), vy + qw * ty + (qz * tx - qx * tz), vz + qw * tz + (qx * ty - qy * tx))
-
-
-def _compose_one(a, b):
-    """a then b on plain floats, as :func:`bagtools.tf._rigid.compose`: T_x_z from T_x_y and T_y_z."""
-    (qa, ta), (qb, tb) = a, b
-    r = _rotate_one(qa, tb)
-    return _quat_mul_one(qa, qb), (r[0] + ta[0], r[1] + ta[1], r[2] + ta[2])
-
-
-def _inverse_one(a):
-    q, t = a
-    q_inv = (-q[0], -q[1], -q[2], q[3])
-    r = _rotate_one(q_inv, t)
-    return q_inv, (-r[0], -r[1], -r[2])
+        edge = track.at(stamp_ns)
+        if edge is None:
+            return None
+        acc = _rigid.compose_one(edge, acc)
+    return acc
 
 
 def _as_stamps(stamp_ns, name: str) -> np.ndarray:
