@@ -200,7 +200,8 @@ def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
     return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=p["resolution"],
                                     max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],
                                     loop_closure=not p["no_loop_closure"], loop_min_score=p["loop_min_score"],
-                                    keep_scans=not p["no_mcap"], relations=p["relations"]),
+                                    keep_scans=not p["no_mcap"], relations=p["relations"],
+                                    scan_frame_offset=p["scan_frame_offset"]),
                         mcap=not p["no_mcap"])
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from bagtools.cli.complete import complete_topics
+from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
 
 
 @click.command("slam")
@@ -26,11 +27,13 @@ from bagtools.cli.complete import complete_topics
               help="Score both trajectories against this .relations file of the log (Kuemmerle et al. 2009: "
                    "'stamp_1 stamp_2 x y z roll pitch yaw' per line, as published for the Intel, Freiburg and MIT "
                    "benchmark logs).")
+@click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
+              help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, paths, scans and loops for Foxglove).")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
-         no_loop_closure: bool, no_odometry: bool, max_range: float | None, relations: str | None, no_mcap: bool,
-         force: bool) -> None:
+         no_loop_closure: bool, no_odometry: bool, max_range: float | None, relations: str | None,
+         scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool, force: bool) -> None:
     """SLAM of BAG's laser scans: laser odometry, loop closures, a pose graph optimized with GTSAM, the map.
 
     Writes OUT/trajectory.tum (the optimized robot base pose at every scan, in
@@ -48,6 +51,7 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
       bagtools slam out/sim --out out/slam
       bagtools slam csail.mcap --out slam_scans --no-odometry --max-range 30
       bagtools slam intel --out slam_intel --relations intel.relations
+      bagtools slam fr079.clf --out slam_fr079 --scan-frame-offset -0.04,0,0
       bagtools eval out/slam/trajectory.tum out/slam/ground_truth.tum --align --gap 20
     """
     from bagtools.outputs import check_outputs
@@ -57,7 +61,8 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
 
     options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
                           loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
-                          loop_min_score=loop_min_score, keep_scans=not no_mcap, relations=relations)
+                          loop_min_score=loop_min_score, keep_scans=not no_mcap, relations=relations,
+                          scan_frame_offset=scan_frame_offset)
     result = SlamPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

@@ -5,9 +5,11 @@ pipeline iterates a dataset and feeds one small algorithm object). For each
 scan, in the robot base frame:
 
 1. **Guesses** of its pose: the wheel odometry's motion since the previous scan
-   (when the bag has odometry), constant velocity (the last motion scaled to
-   the time step, never beyond what the robot can do in it: ``max_speed_mps``,
-   ``max_turn_rate_radps``), and no motion.
+   (when the bag has odometry), constant velocity (the motion over the last
+   ``VELOCITY_SPAN_S`` or more, whose stamps a jittering clock cannot throw
+   off as it does one step's, scaled to the time step, never beyond what the
+   robot can do in it: ``max_speed_mps``, ``max_turn_rate_radps``), and no
+   motion.
 2. **NDT** from the first guess (odometry if there is one) against the current
    keyframe. The other guesses are tried too when they lie outside that
    result's basin; results that disagree mean several minima.
@@ -42,7 +44,11 @@ scan, in the robot base frame:
    winner once more on the keyframe's submap with those finer cells, the next
    level of a multi-resolution NDT: one grid's discretization no longer
    decides the last centimetres. A refinement that moves the pose by more than
-   ``REFINE_MAX_M``/``REFINE_MAX_RAD`` is not taken.
+   ``REFINE_MAX_M``/``REFINE_MAX_RAD`` is not taken, and its move along a
+   direction the finer cells barely constrain (a corridor: their cost's
+   curvature there under ``DEGENERATE_RATIO`` of the largest) is dropped: the
+   first match's motion prior decided that direction, and on the flat fine
+   cost the pose would slide along the corridor on noise.
 5. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
    counted); an odometry motion the match contradicts beyond its noise is
    counted as a rejected odometry sample; a step faster than the robot could
@@ -63,7 +69,7 @@ Poses are planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,6 +129,9 @@ REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
 #: reckoned over the time step plus this, so that a late or early stamp (a driver's, or a log resampled from
 #: another clock) does not rule out the true motion.
 STAMP_JITTER_S = 0.25
+#: Constant velocity is the motion over at least this much time (s): over one step, a stamp off by STAMP_JITTER_S
+#: would make it anything.
+VELOCITY_SPAN_S = 0.5
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
@@ -133,6 +142,10 @@ MAX_SEARCH_M = 3.0
 REFINE_CELL_RATIO = 1.0 / math.sqrt(2.0)
 MIN_REFINE_CELL_M = 0.5
 REFINE_MAX_M, REFINE_MAX_RAD = 0.2, 0.05
+#: Where the finer grid barely constrains a direction of translation (its Hessian's eigenvalues there under this
+#: share of the largest: a corridor), the refinement's move along it is not taken: the fine cost is flat there,
+#: and the pose would slide along the corridor on noise (the coarse match's prior decided that direction).
+DEGENERATE_RATIO = 0.02
 #: The wide search (what the robot can have done) matches against the keyframes within SUBMAP_RADIUS_M, up to this
 #: many: after a sharp turn or a gap the scan may see what only older keyframes saw, and a small submap can match a
 #: repeated scene (a parallel corridor, the mirror image of a junction) better than the place itself.
@@ -353,6 +366,8 @@ class LaserOdometry:
         self._last_odom: np.ndarray | None = None
         self._last_odom_pose = np.zeros(3)  # the pose of the step that had the odometry _last_odom
         self._velocity = np.zeros(3)  # per second, in the base frame
+        self._clock_s = 0.0  # the time steps taken so far, summed (s)
+        self._recent: deque[tuple[float, np.ndarray]] = deque(maxlen=64)  # (clock, pose) of the matched steps
         self._scores: list[float] = []
         self._steps_s: list[float] = []
         self._after_short_step = False
@@ -377,6 +392,7 @@ class LaserOdometry:
 
     def _first(self, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> ScanStep:
         pose = odom.copy() if odom is not None else np.zeros(3)
+        self._recent.append((0.0, pose))
         self._new_keyframe(0, pose, points)
         return ScanStep(stamp_ns, pose, points, -1, np.zeros(3), COVARIANCE_FLOOR.copy(), 1.0, "first", True)
 
@@ -429,8 +445,9 @@ class LaserOdometry:
         pose = _compose(kf.pose, best.pose)
         pose[2] = wrap_to_pi(pose[2])
         self._check(last, pose, dt, prior, best)
+        self._clock_s += dt
         if best.source != "fallback":
-            velocity = _between(last.pose, pose) / dt  # never beyond what the robot can do (a stamp may be off)
+            velocity = self._mean_velocity(pose, last.pose)  # never beyond what the robot can do
             velocity[:2] *= min(1.0, opts.max_speed_mps / max(float(np.hypot(velocity[0], velocity[1])), 1e-12))
             velocity[2] = float(np.clip(velocity[2], -opts.max_turn_rate_radps, opts.max_turn_rate_radps))
             self._velocity = velocity
@@ -604,6 +621,23 @@ class LaserOdometry:
             refined.append(self._ndt(points, ndt, initial, source, prior))
         return refined
 
+    def _mean_velocity(self, pose: np.ndarray, last: np.ndarray) -> np.ndarray:
+        """The velocity (per second) from the most recent matched step at least VELOCITY_SPAN_S back (or the oldest
+        kept) to ``pose`` now: one step's stamps may be off by much of the step, a span's are not. Its direction is
+        that of the last step's chord (from ``last``, in its frame), which the next step's repeats when the robot
+        keeps turning as it did: the span's chord, turned from half the span's turn to half the last step's."""
+        start_s, start = self._recent[0]
+        for t, p in reversed(self._recent):
+            if self._clock_s - t >= VELOCITY_SPAN_S:
+                start_s, start = t, p
+                break
+        self._recent.append((self._clock_s, pose))
+        span = max(self._clock_s - start_s, 1e-3)
+        d = _between(start, pose)
+        turn = 0.5 * (_between(last, pose)[2] - d[2])
+        c, s = math.cos(turn), math.sin(turn)
+        return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]) / span
+
     def _typical_step(self) -> float:
         """The recent typical time step (s): that of a scan whose stamp says nothing of when it was taken (one
         stamped before the scan recorded before it), as the next scan of its laser; STAMP_JITTER_S before any."""
@@ -649,6 +683,7 @@ class LaserOdometry:
         pose = np.asarray(result.pose, dtype=np.float64)
         if result.score <= 0 or not _close(best.pose, pose, REFINE_MAX_M, REFINE_MAX_RAD):
             return best
+        pose[:2] = best.pose[:2] + _constrained(pose[:2] - best.pose[:2], np.asarray(result.hessian)[:2, :2])
         return _Match(pose, best.score, best.covariance, best.source)
 
     def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
@@ -721,6 +756,16 @@ class LaserOdometry:
                 "odometry_rejected": self.counts[ODOM_REJECTED], "faster_than_robot": self.counts[TOO_FAST],
                 "ambiguous": self.counts[AMBIGUOUS], "beyond_reach": self.counts[BEYOND_REACH],
                 "keyframes": len(self.run.keyframe_indexes)}
+
+
+def _constrained(move: np.ndarray, hessian: np.ndarray) -> np.ndarray:
+    """``move`` (2,) without its component along a direction ``hessian`` (2,2, of a cost in that space) barely
+    constrains (eigenvalue under DEGENERATE_RATIO of the largest)."""
+    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
+    if values[1] <= 0:
+        return np.zeros_like(move)
+    weak = vectors[:, 0]
+    return move - weak * float(weak @ move) if values[0] < DEGENERATE_RATIO * values[1] else move
 
 
 def _close(a: np.ndarray, b: np.ndarray, tol_m: float, tol_rad: float) -> bool:

@@ -254,16 +254,17 @@ class _Builder:
                 self._add_loop(c)
 
     def _follow_up(self, node: int, distance: np.ndarray) -> None:
-        """Match ``node`` where each pending global match puts it, once its new map shares no keyframe with the
-        match's (the old chain, the match, the new chain); a consistent follow-up confirms the pair."""
+        """Match ``node`` where each pending match (but look-alikes) puts it, once its new map shares no keyframe
+        with the match's (the old chain, the match, the new chain); a consistent follow-up confirms the pair."""
         o = self.options.loop
         poses = self.graph.poses
-        for p in self.check.pending_global():
+        for p in self.check.to_follow_up():
             if node - p.new <= o.new_map_keyframes:
                 continue
             guess = se2_compose(p.T_old_new, se2_between(poses[p.new], poses[node]))
             sigma_t, sigma_r = self.search.sigmas(abs(self.search.path_m[node] - self.search.path_m[p.new]))
             cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess, kind=FOLLOW_UP)
+            cand.follows = p
             self.candidates.append(cand)
             if cand.T_old_new is None:
                 continue

@@ -47,7 +47,17 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    are one piece of evidence: a look-alike fools both), that is pairwise
    consistent with it (the cycle loop 1, old chain, loop 2, new chain closes
    within the gate: E. Olson's single-cluster test in its smallest form); both
-   are then accepted. Unconfirmed matches are rejected.
+   are then accepted. Unconfirmed matches are rejected. A match waiting is
+   also **followed up** (see step 5) when its window was wide
+   (``wide_window_m`` and more), spanned at least ``COVER_SIGMAS`` of the
+   estimate's uncertainty (not cut short by the search radius) and held no
+   look-alike (as step 5 asks of a global match): each later keyframe whose
+   new map shares none of its keyframes is matched in a small window around
+   where the match puts it. A follow-up repeats the error of a wrong match (a
+   corridor's look-alike, a place outside a window cut short, or a narrow
+   window's best but wrong pose), so other matches wait for an independent
+   second one; and in the back end's outlier check a follow-up and its match
+   are one piece of evidence, not two (:meth:`ConsistencyCheck.supported`).
 
 5. **Global search** (:meth:`LoopClosureSearch.global_due`,
    :meth:`LoopClosureSearch.global_tiles`): the search above trusts the
@@ -102,6 +112,10 @@ OUTLIER = "outlier after optimization"
 # Candidate kinds: searched around the estimate, anywhere, or around a pending global match.
 LOCAL, GLOBAL, FOLLOW_UP = "local", "global", "follow-up"
 TOO_FEW_POINTS = "too few points"
+#: A local match is followed up only when its window spans at least this many sigmas of the estimate's uncertainty
+#: (95 % of where the place can be): beyond that, a match that is unique in its window may be a look-alike of a
+#: place outside it.
+COVER_SIGMAS = 2.0
 LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
 
 
@@ -193,6 +207,8 @@ class LoopCandidate:
     status: str = PENDING
     time_s: float = 0.0
     kind: str = LOCAL
+    look_alike: bool | None = None  # another place of the window scores as well (None: the window was not asked)
+    follows: LoopCandidate | None = None  # for a follow-up: the match it was searched around
 
     def as_dict(self) -> dict:
         out = {"old": self.old, "new": self.new, "kind": self.kind, "status": self.status, "score": round(self.score, 4),
@@ -497,9 +513,17 @@ class LoopClosureSearch:
         reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
         search = dict(initial_pose=guess, search_range=window, angular_resolution_rad=self.angular_step(reach),
                       min_score=min_score)
-        if kind == GLOBAL:  # anywhere in the map: the place must be the window's one good match
+        if kind == GLOBAL or window[0] >= o.wide_window_m:
+            # anywhere in the map, or a window wide enough to hold a corridor's look-alikes: is the place the
+            # window's one good match?
             peaks = match_scans_grid_peaks(current, old_map.correlative, max_peaks=2, min_ratio=o.global_unique_ratio,
                                            separation=(o.global_separation_m, o.global_separation_rad), **search)
+            # uniqueness in a window capped (at the search radius or a full turn) short of COVER_SIGMAS of the
+            # estimate's uncertainty says little of the places outside it: such a match is not followed up
+            capped = bool(window[0] < COVER_SIGMAS * sigma[0] or window[2] < COVER_SIGMAS * sigma[1])
+            cand.look_alike = len(peaks) > 1 or (kind != GLOBAL and capped)
+            if kind != GLOBAL and peaks:  # a local match may still be confirmed by an independent one
+                peaks = peaks[:1]
             if len(peaks) != 1:  # none: nothing scores global_min_score (the search is not run again for why)
                 too_few = min(len(current), old_map.correlative.n_points) < MIN_SCAN_POINTS
                 cand.status = LOOK_ALIKE if peaks else TOO_FEW_POINTS if too_few else LOW_SCORE
@@ -575,8 +599,13 @@ class ConsistencyCheck:
         return now
 
     def supported(self, cand: LoopCandidate, poses: np.ndarray) -> bool:
-        """Is another accepted match pairwise consistent with ``cand`` at the estimate ``poses``?"""
-        return any(p is not cand and self._pair_consistent(cand, p, poses) for p in self.accepted)
+        """Is another accepted match, searched independently of ``cand``, pairwise consistent with it at the
+        estimate ``poses``? A follow-up and the match it was searched around are one piece of evidence here: a
+        follow-up repeats its match's error, so it confirms a match enough to enter the graph, not against it."""
+        def same_search(a: LoopCandidate, b: LoopCandidate) -> bool:
+            return a.follows is b or b.follows is a or (a.follows is not None and a.follows is b.follows)
+        return any(p is not cand and not same_search(cand, p) and self._pair_consistent(cand, p, poses)
+                   for p in self.accepted)
 
     def _pair_consistent(self, a: LoopCandidate, b: LoopCandidate, poses: np.ndarray) -> bool:
         """Does the cycle a.old -> a.new -> b.new -> b.old -> a.old close within the gate?"""
@@ -598,9 +627,11 @@ class ConsistencyCheck:
         return bool(np.hypot(cycle[0], cycle[1]) <= o.gate_sigmas * sigma_t
                     and abs(wrap_to_pi(cycle[2])) <= o.gate_sigmas * sigma_r)
 
-    def pending_global(self) -> list[LoopCandidate]:
-        """The global matches waiting for a follow-up."""
-        return [p for p in self.pending if p.kind == GLOBAL]
+    def to_follow_up(self) -> list[LoopCandidate]:
+        """The matches waiting for a second one that a follow-up may give: those whose window was wide and held no
+        look-alike. A follow-up is searched in a small window where the match puts the robot, so it repeats the
+        match's error if the match had one: only a match that is the one good place of a wide window is worth it."""
+        return [p for p in self.pending if p.kind != FOLLOW_UP and p.look_alike is False]
 
     def expire(self, newest: int) -> list[LoopCandidate]:
         """Reject pending matches older than ``pending_keyframes`` keyframes before ``newest``; returns them."""

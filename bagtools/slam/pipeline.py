@@ -82,7 +82,9 @@ class SlamOptions:
     (``SlamResult.front_end.scans``), for results.mcap. ``relations``: a
     ``.relations`` file of the log (Kümmerle et al. 2009, the classic
     benchmarks' ground truth) to score both trajectories with
-    (:mod:`bagtools.trajectory.relations`).
+    (:mod:`bagtools.trajectory.relations`). ``scan_frame_offset``: (x m, y m,
+    yaw rad) of the laser on the robot base, overriding (or standing in for)
+    tf, for the front end and the map alike.
     """
 
     topic: str = "/scan"
@@ -96,6 +98,7 @@ class SlamOptions:
     loop_kernel: str = "huber"
     keep_scans: bool = False
     relations: str | None = None
+    scan_frame_offset: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution_m) and 1.0 / MAX_RESOLUTION <= self.resolution_m <= 1.0 / MIN_RESOLUTION):
@@ -111,6 +114,9 @@ class SlamOptions:
             raise BagtoolsError(f"loop_max_range_m must be a positive number of metres, got {self.loop_max_range_m}")
         if not self.topic:
             raise BagtoolsError("--topic must name a LaserScan topic")
+        if self.scan_frame_offset is not None and (len(self.scan_frame_offset) != 3
+                                                   or not all(math.isfinite(v) for v in self.scan_frame_offset)):
+            raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
 
     def back_end_options(self) -> BackEndOptions:
         """The back end's settings: the loop search with this run's radius, score and range."""
@@ -130,7 +136,8 @@ FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 def laser_odometry(bag_path: Path, options: SlamOptions) -> NdtOdomResult:
     """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting
     (keeping the scans when results.mcap will replay them)."""
-    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry),
+    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry,
+                                                  scan_frame_offset=options.scan_frame_offset),
                          keep_scans=options.keep_scans)
 
 
@@ -240,9 +247,12 @@ class SlamPipeline:
         """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of)."""
         o = self.options
         options = GridMapOptions(topic=o.topic, frame=SLAM_FRAME, poses="slam trajectory", resolution=1.0 / o.resolution_m,
-                                 max_range_m=o.max_range_m or MAP_MAX_RANGE_M, base_frame=base_frame)
+                                 max_range_m=o.max_range_m or MAP_MAX_RANGE_M, base_frame=base_frame,
+                                 scan_frame_offset=o.scan_frame_offset)
         result = GridMapPipeline(self.bag_path, options, trajectory=trajectory).run()
-        self.warnings.extend(w for w in result.summary.get("warnings", []) if w not in self.warnings)
+        # what the front end said already (perhaps with a hint after it) is not said again
+        self.warnings.extend(w for w in result.summary.get("warnings", [])
+                             if not any(said.startswith(w) for said in self.warnings))
         summary = {k: v for k, v in result.summary.items() if k not in ("options", "warnings", "bag", "poses")}
         return result.grid, summary
 

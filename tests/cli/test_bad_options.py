@@ -31,6 +31,7 @@ BAG = str(FIXTURES / "sim_lap_cloud_20s")
     (["ndt-odom", BAG, "--out", "{out}", "--scan-frame-offset", "1e308,1e308,0"], "within 100 m of the base"),
     (["grid", BAG, "--out", "{out}", "--scan-frame-offset", "0,nan,0"], "X and Y finite"),
     (["ndt-odom", BAG, "--out", "{out}", "--scan-frame-offset", "0,0,inf"], "YAW finite"),
+    (["slam", BAG, "--out", "{out}", "--scan-frame-offset", "1,2"], "expected X,Y,YAW"),
 ])
 def test_refused_in_one_line(argv: list[str], expected: str, tmp_path: Path, capsys) -> None:
     out = tmp_path / "out"

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bagtools.ndtodom import FrontEndOptions, LaserOdometry, NdtOdomOptions, run_front_end
+from bagtools.ndtodom.frontend import _constrained
 from bagtools.trajectory import rpe_frames
 from bagtools.transforms import se2_between, se2_compose, tform2pose
 from tests.conftest import FIXTURES
@@ -61,6 +62,25 @@ def test_a_scan_stamped_before_the_scan_before_it_is_the_next_of_its_laser(lap) 
     err = step_errors(front.run.poses(), truth[keep])
     assert front.counts["beyond_reach"] == 0, front.counts
     assert np.hypot(err[:, 0], err[:, 1]).max() < 0.03 and np.abs(err[:, 2]).max() < np.radians(1.0)
+
+
+def test_constant_velocity_holds_when_every_stamp_is_off(lap) -> None:
+    """No odometry, stamps off by +-40 % of the time step in turn (a log resampled from another clock): one step's
+    motion over its own time step says 0.4x or 3x the speed; the motion over half a second says it within the
+    jitter's share of that span."""
+    steps, truth = lap
+    true_stamps = np.array([s.stamp_ns for s in steps])
+    step_ns = int(np.median(np.diff(true_stamps)))
+    stamps = true_stamps + np.where(np.arange(len(steps)) % 2 == 0, 1, -1) * int(0.4 * step_ns)
+    front = LaserOdometry(FrontEndOptions(cell_size_m=0.5, voxel_m=0.1))
+    errors = []
+    for k, stamp in enumerate(stamps):
+        front.register(int(stamp), steps[k].points_base, None)
+        if k >= 5:  # the true speed over the last true second, at this scan
+            back = k - 5
+            true_speed = np.hypot(*se2_between(truth[back], truth[k])[:2]) / ((true_stamps[k] - true_stamps[back]) / 1e9)
+            errors.append(abs(np.hypot(*front._velocity[:2]) - true_speed))
+    assert np.median(errors) < 0.03 and np.percentile(errors, 90) < 0.1, (np.median(errors), np.percentile(errors, 90))
 
 
 @pytest.mark.parametrize("enabled", [True, False])
@@ -216,6 +236,19 @@ def test_the_refinement_keeps_the_lap_accurate(lap) -> None:
         errors[refine] = np.hypot(err[:, 0], err[:, 1])
         assert errors[refine].max() < 0.02 and np.abs(err[:, 2]).max() < np.radians(1.0), (refine, errors[refine].max())
     assert errors[True].mean() < 1.2 * errors[False].mean(), (errors[True].mean(), errors[False].mean())
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.7, 2.0])
+def test_the_refinement_keeps_out_of_a_direction_its_cost_does_not_constrain(angle: float) -> None:
+    """A corridor along ``angle``: the fine cost's curvature along it is 1 % of that across it, and a move along it
+    is dropped; with a curvature of 10 % (doors, a junction) the move is kept whole."""
+    along, across = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
+    move = 0.1 * along + 0.02 * across
+    corridor = 100.0 * np.outer(across, across) + 1.0 * np.outer(along, along)
+    assert np.allclose(_constrained(move, corridor), 0.02 * across)
+    room = 100.0 * np.outer(across, across) + 10.0 * np.outer(along, along)
+    assert np.allclose(_constrained(move, room), move)
+    assert np.allclose(_constrained(move, np.zeros((2, 2))), 0.0)  # no curvature at all: no move is taken
 
 
 @pytest.mark.parametrize("first", [1, 2, 5, 13])

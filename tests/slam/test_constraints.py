@@ -130,6 +130,40 @@ def test_a_global_match_in_a_corridor_is_a_look_alike(junction: bool) -> None:
         assert np.hypot(*cand.T_old_new[:2]) < 0.05 and abs(cand.T_old_new[2]) < 0.01
 
 
+@pytest.mark.parametrize("junction", [False, True])
+def test_a_wide_local_window_says_when_it_holds_a_look_alike(junction: bool) -> None:
+    """A local match searched in a window as wide as a corridor's look-alikes are apart is matched, and says
+    whether another place of its window scores as well; a narrow window is not asked."""
+    search, poses = _corridor_search(junction)
+    wide = search.match(10, 30, poses, (1.0, 0.1))
+    assert wide.window[0] >= search.options.wide_window_m
+    assert wide.T_old_new is not None and wide.look_alike is (not junction)
+    narrow = search.match(10, 30, poses, (0.1, 0.03))
+    assert narrow.window[0] < search.options.wide_window_m
+    assert narrow.T_old_new is not None and narrow.look_alike is None
+    # a window cut short by the search radius (5 m for 2 sigmas of 3 m) cannot say there is no look-alike
+    short = search.match(10, 30, poses, (3.0, 0.1))
+    assert short.window[0] == search.options.search_radius_m and short.look_alike is True
+
+
+def test_only_the_one_good_place_of_a_wide_window_is_followed_up() -> None:
+    poses, path = _retraced_corridor()
+    check = ConsistencyCheck(LoopOptions(), path)
+    same = np.zeros(3)
+    # new maps that share keyframes (new_map_keyframes = 4): none confirms another
+    local = _cand(2, 22, same, same, (0.6, 0.1))
+    local.look_alike = False  # its wide window held no look-alike
+    narrow = _cand(3, 23, same, same, (0.35, 0.05))  # a narrow window was not asked
+    narrow.window = np.array([0.6, 0.6, 0.15])
+    look_alike = _cand(5, 25, same, same, (0.9, 0.2))
+    look_alike.look_alike = True
+    follow_up = _cand(4, 24, same, same, (0.6, 0.1))
+    follow_up.kind = FOLLOW_UP
+    for c in (local, narrow, look_alike, follow_up):
+        assert check.review(c, poses) == [] and c.status == PENDING
+    assert check.to_follow_up() == [local]
+
+
 def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
     return LoopCandidate(old, new, guess, np.array([1.0, 1.0, 0.3]), sigma, T, np.eye(3) * 1e-4, 0.8)
 
@@ -180,8 +214,8 @@ def test_a_global_match_is_gated_loosely_by_the_drift_model_and_needs_a_follow_u
     assert check.review(near, poses) == [] and near.status == INCONSISTENT
     # after a long loop (drift model: 3 m, 0.5 rad) it is a correction within 5 sigmas
     found = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (3.0, 0.5), same, np.eye(3) * 1e-4, 0.8,
-                          kind=GLOBAL)
-    assert check.review(found, poses) == [] and found.status == PENDING and check.pending_global() == [found]
+                          kind=GLOBAL, look_alike=False)
+    assert check.review(found, poses) == [] and found.status == PENDING and check.to_follow_up() == [found]
     # a sure local match elsewhere does not confirm it; a follow-up where it puts keyframe 28 does
     wrong = LoopCandidate(2, 28, same, np.array([0.3, 0.3, 0.1]), (0.05, 0.01), np.array([1.5, 0.0, 0.0]),
                           np.eye(3) * 1e-4, 0.8, kind=FOLLOW_UP)
@@ -190,7 +224,7 @@ def test_a_global_match_is_gated_loosely_by_the_drift_model_and_needs_a_follow_u
     follow = LoopCandidate(2, 28, guess, np.array([0.3, 0.3, 0.1]), (0.2, 0.06), guess, np.eye(3) * 1e-4, 0.8,
                            kind=FOLLOW_UP)
     assert set(map(id, check.review(follow, poses))) == {id(found), id(follow)}
-    assert found.status == ACCEPTED and not check.pending_global()
+    assert found.status == ACCEPTED and not check.to_follow_up()
 
 
 def test_a_loop_is_supported_by_a_consistent_loop_from_other_scans() -> None:
@@ -209,6 +243,22 @@ def test_a_loop_is_supported_by_a_consistent_loop_from_other_scans() -> None:
     far = _cand(8, 28, same, same, (0.05, 0.01))
     check.review(far, poses)
     assert check.supported(first, poses) and check.supported(far, poses)
+
+
+def test_a_follow_up_does_not_support_its_own_match_against_the_graph() -> None:
+    """A follow-up repeats its match's error: it lets the match into the graph, but when the graph finds the match
+    an outlier, only a match searched independently may speak for it."""
+    poses, path = _retraced_corridor()
+    check = ConsistencyCheck(LoopOptions(), path)
+    same = np.zeros(3)
+    match = _cand(2, 22, same, same, (0.6, 0.1))
+    follow = _cand(2, 28, same, same, (0.2, 0.05))
+    follow.kind, follow.follows = FOLLOW_UP, match
+    check.accepted += [match, follow]
+    assert not check.supported(match, poses) and not check.supported(follow, poses)
+    independent = _cand(8, 28, same, same, (0.6, 0.1))  # searched on its own from the same scans as the follow-up
+    check.accepted.append(independent)
+    assert check.supported(match, poses)
 
 
 def test_global_tiles_cover_the_old_path_once_per_tile() -> None:

@@ -221,3 +221,15 @@ def test_real_csail_log_without_odometry_from_later_first_scans(csail_scans_step
         front.register(step.stamp_ns, step.points_base, None)
     result = SlamPipeline(bag, SlamOptions(use_odometry=False), front_end=_recorded(front.run)).run()
     assert result.summary["errors_slam"]["ape_aligned_m"]["rmse"] < 0.15, result.summary["errors_slam"]["ape_aligned_m"]
+
+
+def test_a_laser_without_its_mount_in_tf_is_said_once_and_takes_scan_frame_offset(real_dir: Path) -> None:
+    """The real TurtleBot3 bag has no base_link -> base_scan transform: the run says so once, with the option that
+    sets it (slam's own); given that option, the front end and the map both use it, and nothing is said."""
+    bag = real_dir / "turtlebot3_real_lidar_odom.bag"
+    said = SlamPipeline(bag, SlamOptions(loop_closure=False)).run().summary["warnings"]
+    missing = [w for w in said if "no transform from base_link to base_scan" in w]
+    assert len(missing) == 1 and "--scan-frame-offset" in missing[0], said
+    given = SlamPipeline(bag, SlamOptions(loop_closure=False, scan_frame_offset=(-0.064, 0.0, 0.0))).run()
+    assert not any("no transform from" in w for w in given.summary["warnings"]), given.summary["warnings"]
+    assert given.summary["keyframes"] > 10
