@@ -372,3 +372,43 @@ def _typestore() -> dict[str, Any]:
     store = get_typestore(Stores.ROS1_NOETIC)
     store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MSGTYPE))
     return store.types
+
+
+def write_flaser_log(bag_path: str | Path, out_path: str | Path, scan_topic: str = "/scan",
+                     odom_topic: str = "/odom") -> int:
+    """Write a bag's LaserScans as a CARMEN log of ``FLASER`` lines (the classic benchmarks' own format); the
+    number of lines.
+
+    Lines are in recording order (``header.seq`` when the bag has it, else the
+    bag's order), each with the odometry pose nearest its stamp (``odom_topic``,
+    nav_msgs/Odometry) as both its laser and robot pose, and its stamp to the
+    microsecond as ipc and logger timestamps. Readings that are not finite are
+    written as :data:`FLASER_MAX_RANGE_M`. The beams' angles are not written (a
+    FLASER line has none): read back, they span 180 degrees end to end.
+    """
+    from bagtools.io.decode import decode_odometry
+    from bagtools.io.reader import open_bag
+
+    scans, odom = [], []
+    with open_bag(bag_path) as bag:
+        for n, rec in enumerate(bag.messages([scan_topic, odom_topic])):
+            stamp = rec.msg.header.stamp
+            if rec.topic == scan_topic:
+                order = getattr(rec.msg.header, "seq", None)
+                ranges = np.asarray(rec.msg.ranges, dtype=np.float64)
+                ranges = np.where(np.isfinite(ranges), ranges, FLASER_MAX_RANGE_M)
+                scans.append((n if order is None else order, f"{stamp.sec}.{stamp.nanosec // 1000:06d}",
+                              stamp.sec + stamp.nanosec * 1e-9, ranges))
+            else:
+                sample = decode_odometry(rec.msg)
+                qx, qy, qz, qw = sample.orientation_xyzw
+                yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+                odom.append((sample.stamp_ns * 1e-9, (sample.position_m[0], sample.position_m[1], yaw)))
+    odom.sort(key=lambda o: o[0])
+    times = np.array([o[0] for o in odom])
+    with Path(out_path).open("w") as f:
+        for _, text, t, ranges in sorted(scans, key=lambda s: s[0]):
+            x, y, th = odom[int(np.argmin(np.abs(times - t)))][1] if odom else (0.0, 0.0, 0.0)
+            pose = f"{x:.6f} {y:.6f} {th:.6f}"
+            f.write(f"FLASER {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {pose} {pose} {text} nohost {text}\n")
+    return len(scans)

@@ -187,3 +187,36 @@ def test_a_laser_that_reports_no_return_as_its_largest_reading_is_found(tmp_path
     log = write(tmp_path / "param.clf", ["PARAM robot_front_laser_max 25.0 nohost 0", lines[0]])
     with open_bag(log) as bag:
         assert decode_laserscan(next(r.msg for r in bag.messages(["/scan"]))).range_max_m == pytest.approx(25.0)
+
+
+def test_a_bag_written_as_a_flaser_log_reads_back(tmp_path: Path) -> None:
+    """Scans and odometry of a bag as FLASER lines: read back, the same scans at the same stamps (to the
+    microsecond), readings to the centimetre (a missing one at the maximum range, read back as no return), each
+    with the odometry pose nearest its stamp."""
+    from bagtools.io.carmen import write_flaser_log
+    from tests.conftest import make_scan, write_bag
+    from tests.ndtodom.conftest import make_odometry
+
+    t0 = 1_700_000_000_123_456_000
+    rng = np.random.default_rng(0)
+    ranges = [rng.uniform(0.5, 8.0, 180) for _ in range(4)]
+    ranges[1][7] = np.nan
+    T = [np.eye(4) for _ in range(4)]
+    for k in range(4):
+        T[k][0, 3] = 0.5 * k
+    msgs = [("/scan", "sensor_msgs/msg/LaserScan", t0 + k * 200_000_000, make_scan(t0 + k * 200_000_000, ranges[k]))
+            for k in range(4)]
+    msgs += [("/odom", "nav_msgs/msg/Odometry", t0 + k * 200_000_000 + 1000,
+              make_odometry(t0 + k * 200_000_000 + 1000, "odom", "base_link", T[k])) for k in range(4)]
+    bag = write_bag(tmp_path / "b", sorted(msgs, key=lambda m: m[2]))
+    log = tmp_path / "b.clf"
+    assert write_flaser_log(bag, log) == 4
+    with open_bag(log) as read:
+        scans = [decode_laserscan(r.msg) for r in read.messages(["/scan"])]
+        odom = [decode_odometry(r.msg) for r in read.messages(["/odom"])]
+    assert [s.stamp_ns for s in scans] == [t0 + k * 200_000_000 for k in range(4)]
+    for k, s in enumerate(scans):
+        expected = np.round(ranges[k], 2)
+        expected[~np.isfinite(ranges[k])] = np.inf
+        np.testing.assert_allclose(s.ranges_m, expected, atol=1e-6)
+    assert [round(o.position_m[0], 6) for o in odom] == [0.0, 0.5, 1.0, 1.5]

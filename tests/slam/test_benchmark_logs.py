@@ -8,15 +8,12 @@ the front end goes wrong there and the map breaks.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 from rosbags.rosbag1 import Reader, Writer
 
-from bagtools.io import decode_odometry, open_bag
-from bagtools.io.carmen import FLASER_MAX_RANGE_M
+from bagtools.io.carmen import write_flaser_log
 from bagtools.slam import SlamOptions, SlamPipeline
 from tests.conftest import REPO
 
@@ -65,27 +62,8 @@ def test_intel_holds_where_scans_and_odometry_are_stamped_out_of_order(intel_hea
 def intel_head_carmen(intel_head: Path) -> Path:
     """The same 2500 scans as the CARMEN log they came from: FLASER lines in the order the robot recorded them,
     each with its odometry pose and its stamp to the microsecond; read back, the beams span 180 degrees."""
-    scans, odom = [], []
-    with open_bag(intel_head) as bag:
-        for rec in bag.messages(["/scan", "/odom"]):
-            stamp = rec.msg.header.stamp
-            text = f"{stamp.sec}.{stamp.nanosec // 1000:06d}"
-            if rec.topic == "/scan":
-                ranges = np.where(np.isfinite(rec.msg.ranges), rec.msg.ranges, FLASER_MAX_RANGE_M)
-                scans.append((rec.msg.header.seq, text, stamp.sec + stamp.nanosec * 1e-9, ranges))
-            else:
-                sample = decode_odometry(rec.msg)
-                x, y, _ = sample.position_m
-                qx, qy, qz, qw = sample.orientation_xyzw
-                odom.append((sample.stamp_ns * 1e-9, (x, y, math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)))))
-    odom.sort(key=lambda o: o[0])
-    times = np.array([o[0] for o in odom])
     path = intel_head.with_name("intel_head.clf")
-    with path.open("w") as f:
-        for _, text, t, ranges in sorted(scans, key=lambda s: s[0]):
-            x, y, th = odom[int(np.argmin(np.abs(times - t)))][1]
-            f.write(f"FLASER {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {x:.6f} {y:.6f} {th:.6f} "
-                    f"{x:.6f} {y:.6f} {th:.6f} {text} nohost {text}\n")
+    assert write_flaser_log(intel_head, path) == FIRST_SCANS
     return path
 
 
