@@ -39,8 +39,9 @@ demo: setup
 	$(BAGTOOLS) grid $(OUT)/turtlebot3_sim --out $(OUT)/grid_ndt --poses $(OUT)/ndt_odom/trajectory.tum --frame odom --force
 	@echo "demo outputs are under $(OUT)/"
 
+# One pytest worker per core (pytest-xdist): the slowest tests replay real logs for tens of seconds each.
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 docs: setup
 	$(PY) docs/make_figures.py
