@@ -110,3 +110,25 @@ def synthetic_bag(tmp_path: Path) -> Path:
             msgs.append(("/cloud", "sensor_msgs/msg/PointCloud2", t + 40_000_000, make_cloud(t, xyz)))
     msgs.sort(key=lambda m: m[2])
     return write_bag(tmp_path / "synthetic", msgs)
+
+
+def ros1_scan_slice(source: Path, path: Path, first: int, last: int, scan_topic: str = "/scan") -> Path:
+    """A ROS 1 bag of scans ``first``..``last - 1`` (0-based, in the order recorded) of the ROS 1 bag ``source``,
+    with every other topic's messages from the scan before the first on, and /tf_static whenever recorded."""
+    from rosbags.rosbag1 import Reader as Ros1Reader
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    with Ros1Reader(source) as reader, Ros1Writer(path) as writer:
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+               for c in reader.connections}
+        seen = 0  # scans before this message
+        for conn, t_ns, raw in reader.messages():
+            if conn.topic == scan_topic:
+                if seen >= last:
+                    break
+                if seen >= first:
+                    writer.write(out[conn.id], t_ns, raw)
+                seen += 1
+            elif seen >= first or conn.topic == "/tf_static":
+                writer.write(out[conn.id], t_ns, raw)
+    return path

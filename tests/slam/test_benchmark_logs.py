@@ -11,11 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from rosbags.rosbag1 import Reader, Writer
 
 from bagtools.io.carmen import write_flaser_log
 from bagtools.slam import SlamOptions, SlamPipeline
-from tests.conftest import REPO
+from tests.conftest import REPO, ros1_scan_slice
 
 BENCHMARK_DIR = REPO.parent / "shared" / "data" / "benchmark"
 FIRST_SCANS = 2500
@@ -27,18 +26,7 @@ def intel_head(tmp_path_factory) -> Path:
     source = BENCHMARK_DIR / "intel.bag"
     if not source.is_file():
         pytest.skip(f"benchmark logs not available: {source} does not exist")
-    path = tmp_path_factory.mktemp("intel") / "intel_head.bag"
-    with Reader(source) as reader, Writer(path) as writer:
-        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-               for c in reader.connections}
-        scans = 0
-        for conn, t_ns, raw in reader.messages():
-            if conn.topic == "/scan":
-                scans += 1
-                if scans > FIRST_SCANS:
-                    break
-            writer.write(out[conn.id], t_ns, raw)
-    return path
+    return ros1_scan_slice(source, tmp_path_factory.mktemp("intel") / "intel_head.bag", 0, FIRST_SCANS)
 
 
 @pytest.mark.parametrize("use_odometry", [False, True])
