@@ -11,6 +11,7 @@ The layers, bottom up (nothing imports upward):
 - ``grid``: log-odds occupancy grids and ray casting;
 - ``gridmap``, ``cloudmap``: maps from known poses (``grid``, ``map-cloud``);
 - ``ndtodom``: laser odometry (``ndt-odom``), the front end of SLAM;
+- ``localize``: where scans are in a map the robot already has (so far the global search, ``GlobalLocalizer``);
 - ``slam``: loop closure, the GTSAM pose graph, the SLAM pipeline and ``eval``;
 - ``results``: results.mcap writers (to open beside the bag in Foxglove);
 - ``export``: any topic to CSV, NPZ or Parquet;

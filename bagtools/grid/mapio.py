@@ -133,6 +133,15 @@ class Nav2Map:
         out[self.occupancy == 0] = 0
         return out
 
+    def occupied_points(self) -> np.ndarray:
+        """(N, 2) map-frame x, y (m) of the centres of the occupied cells (occupancy 100), the origin's yaw
+        applied as map_server places the image: its lower-left pixel's corner at the origin pose."""
+        rows, cols = np.nonzero(self.occupancy == 100)
+        local = np.c_[(cols + 0.5) * self.resolution_m, (self.occupancy.shape[0] - rows - 0.5) * self.resolution_m]
+        x, y, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+
 
 _KEY_LINE = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\s*:\s*(.*?)\s*$")
 

@@ -16,6 +16,7 @@ the window's distinct good poses (for scenes that repeat), best first.
 
 from bagtools.ndt.correlative import (
     CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_peaks, match_scans_grid_ranges,
+    voxel_subsample,
 )
 from bagtools.ndt.grid import NdtReference
 from bagtools.ndt.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
@@ -23,4 +24,5 @@ from bagtools.ndt.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_
 __all__ = [
     "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult", "match_scans",
     "match_scans_grid", "match_scans_grid_peaks", "match_scans_grid_ranges", "match_scans_ranges", "ranges_to_points",
+    "voxel_subsample",
 ]

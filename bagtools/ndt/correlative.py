@@ -770,3 +770,14 @@ def match_scans_grid_ranges(
         initial_pose=initial_pose, search_range=search_range, resolution_m=resolution_m,
         angular_resolution_rad=angular_resolution_rad, sigma_m=sigma_m, min_score=min_score, method=method,
     )
+
+
+def voxel_subsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """The first point of each occupied ``voxel_m`` square cell of (N,2) ``points`` (metres)."""
+    if len(points) == 0:
+        return points
+    cells = np.floor(points / voxel_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    keys = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
+    _, first = np.unique(keys, return_index=True)
+    return points[np.sort(first)]

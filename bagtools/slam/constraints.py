@@ -97,7 +97,7 @@ import numpy as np
 
 from bagtools.ndt import (
     MIN_SCAN_POINTS, CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid,
-    match_scans_grid_peaks,
+    match_scans_grid_peaks, voxel_subsample,
 )
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
@@ -218,17 +218,6 @@ class LoopCandidate:
             out["T_old_new"] = [round(float(v), 5) for v in self.T_old_new]
             out["correction_m"] = round(float(np.hypot(*se2_between(self.guess, self.T_old_new)[:2])), 4)
         return out
-
-
-def voxel_subsample(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """The first point of each occupied ``voxel_m`` square cell of (N,2) ``points`` (metres)."""
-    if len(points) == 0:
-        return points
-    cells = np.floor(points / voxel_m).astype(np.int64)
-    cells -= cells.min(axis=0)
-    keys = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
-    _, first = np.unique(keys, return_index=True)
-    return points[np.sort(first)]
 
 
 #: Added to every loop covariance (m^2, m^2, rad^2): 1 cm and 0.3 degrees, the laser odometry's floor for its edges.
