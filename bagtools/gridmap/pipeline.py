@@ -131,9 +131,12 @@ class GridMapPipeline:
 
     def _load_tf(self, bag: BagReader) -> None:
         dynamic, static = read_tf_arrays(bag)
-        dynamic = repair_dynamic_tf(dynamic, self.warnings)[0]
+        poses_from_tf = self.options.poses_kind == POSES_TF and self.trajectory is None
+        # what the repair drops is said only when tf places the scans (else it is not what the map was made from,
+        # and a caller such as slam has said what its own reading of tf found)
+        dynamic = repair_dynamic_tf(dynamic, self.warnings if poses_from_tf else [])[0]
         self.buffer = TfBuffer.from_arrays(dynamic, static, skip_invalid=True)
-        if self.options.poses_kind != POSES_TF or self.trajectory is not None:
+        if not poses_from_tf:
             return
         if not self.buffer.frames:
             raise BagtoolsError("bag has no /tf or /tf_static data, so scans cannot be placed in a frame "

@@ -220,3 +220,17 @@ def test_unusable_range_max_needs_max_range(tmp_path: Path) -> None:
         GridMapPipeline(bag, GridMapOptions(frame="odom")).run()
     result = GridMapPipeline(bag, GridMapOptions(frame="odom", max_range_m=2.0)).run()
     assert result.summary["max_range_m"] == [2.0] and result.summary["scans_used"] == 1
+
+
+def test_tf_repairs_are_said_only_when_tf_places_the_scans(real_dir: Path) -> None:
+    """The real TurtleBot3 bag's /tf has corrupt samples and glitches. Mapped at tf's poses the run says what it
+    dropped; mapped at poses given to it (slam's optimized trajectory, here the laser odometry's) it does not use
+    those samples, and says nothing of them (slam's front end has said what its own reading of tf found)."""
+    from bagtools.ndtodom import run_front_end
+
+    bag = real_dir / "turtlebot3_real_lidar_odom.bag"
+    by_tf = GridMapPipeline(bag, GridMapOptions(frame="odom")).run().summary["warnings"]
+    assert any("corrupt /tf samples odom -> base_link" in w for w in by_tf)
+    given = GridMapPipeline(bag, GridMapOptions(frame="odom", poses="laser odometry"),
+                            trajectory=run_front_end(bag).trajectory).run().summary["warnings"]
+    assert not any("odom -> base_link" in w and ("corrupt" in w or "glitch" in w) for w in given), given

@@ -38,6 +38,8 @@ def test_intel_holds_where_scans_and_odometry_are_stamped_out_of_order(intel_hea
     if use_odometry:
         assert summary["front_end"]["odometry_used"]
         assert any("odometry sample(s) on /odom are stamped before" in w for w in summary["warnings"])
+    # tf's glitches are said once, as the front end found them (the map is drawn at the SLAM poses, not tf's)
+    assert sum("isolated glitch(es)" in w for w in summary["warnings"]) <= 1, summary["warnings"]
     assert summary["scans"] == FIRST_SCANS
     assert summary["front_end"]["scans_out_of_recording_order"] > 50
     scored = summary["relations"]["slam"]
@@ -61,6 +63,7 @@ def test_intel_holds_read_from_its_carmen_log(intel_head_carmen: Path, use_odome
     options = SlamOptions(use_odometry=use_odometry, relations=str(BENCHMARK_DIR / "intel.relations"))
     summary = SlamPipeline(intel_head_carmen, options).run().summary
     assert summary["scans"] == FIRST_SCANS
+    assert sum("isolated glitch(es)" in w for w in summary["warnings"]) <= 1, summary["warnings"]
     scored = summary["relations"]["slam"]
     assert scored["used"] > 300
     assert scored["trans_mean_m"] < 0.03 and scored["trans_max_m"] < 1.0, scored
