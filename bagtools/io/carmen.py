@@ -404,11 +404,18 @@ def write_flaser_log(bag_path: str | Path, out_path: str | Path, scan_topic: str
                 qx, qy, qz, qw = sample.orientation_xyzw
                 yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
                 odom.append((sample.stamp_ns * 1e-9, (sample.position_m[0], sample.position_m[1], yaw)))
+    scans.sort(key=lambda s: s[0])
     odom.sort(key=lambda o: o[0])
-    times = np.array([o[0] for o in odom])
+    poses = np.array([o[1] for o in odom]).reshape(-1, 3)
+    if len(odom):  # the odometry sample nearest each scan's stamp (the earlier one on a tie)
+        times = np.array([o[0] for o in odom])
+        stamps = np.array([s[2] for s in scans])
+        after = np.clip(np.searchsorted(times, stamps), 0, len(times) - 1)
+        before = np.maximum(after - 1, 0)
+        nearest = np.where(np.abs(stamps - times[before]) <= np.abs(times[after] - stamps), before, after)
     with Path(out_path).open("w") as f:
-        for _, text, t, ranges in sorted(scans, key=lambda s: s[0]):
-            x, y, th = odom[int(np.argmin(np.abs(times - t)))][1] if odom else (0.0, 0.0, 0.0)
+        for k, (_, text, _, ranges) in enumerate(scans):
+            x, y, th = poses[nearest[k]] if len(odom) else (0.0, 0.0, 0.0)
             pose = f"{x:.6f} {y:.6f} {th:.6f}"
             f.write(f"FLASER {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {pose} {pose} {text} nohost {text}\n")
     return len(scans)
