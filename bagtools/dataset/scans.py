@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -36,7 +37,8 @@ from bagtools.io import (
     decode_laserscan,
     decode_pointcloud2,
 )
-from bagtools.io.decode import DecodeError
+from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr
+from bagtools.io.decode import CloudArrays, DecodeError
 from bagtools.progress import progress
 
 SKIP_BACKWARDS = "stamp not after the previous scan"
@@ -128,17 +130,18 @@ class ScanStream:
 
     def __iter__(self) -> Iterator[ScanMessage]:
         last_ns: int | None = None
-        records = self.bag.messages([self.topic])
+        records = self.bag.messages([self.topic], from_cdr=laserscan_from_cdr)
         if self.desc is not None:
             records = progress(records, total=self.total, desc=self.desc, unit="scan")
         for rec in records:
             self.read += 1
             try:
-                scan = decode_laserscan(rec.msg)
+                scan = rec.msg if isinstance(rec.msg, LaserScanArrays) else decode_laserscan(rec.msg)
             except DecodeError as err:
                 self.skipped[f"unusable header: {err.problem}"] += 1
                 continue
-            self.notes.update(scan.notes)
+            if scan.notes:
+                self.notes.update(scan.notes)
             if self.increasing and last_ns is not None and scan.stamp_ns <= last_ns:
                 self.skipped[SKIP_BACKWARDS] += 1
                 if self._first_backwards_ns is None:
@@ -149,7 +152,7 @@ class ScanStream:
                 continue
             self.frame_ids.add(scan.frame_id)
             last_ns = scan.stamp_ns
-            seq = getattr(rec.msg.header, "seq", None)
+            seq = getattr(getattr(rec.msg, "header", None), "seq", None)  # ROS 1 numbers its messages
             yield ScanMessage(rec.log_time_ns, scan, None if seq is None else int(seq))
 
     def warnings(self) -> list[str]:
@@ -220,12 +223,13 @@ class SensorStream:
                 yield SensorPoints(scan.stamp_ns, item.log_time_ns, scan.frame_id, points, intensity,
                                    scan=scan if self.attributes else None)
             return
-        records: Iterable = self.bag.messages([self.topic])
+        records: Iterable = self.bag.messages([self.topic], from_cdr=partial(pointcloud2_from_cdr,
+                                                                           attributes=self.attributes))
         if self.desc is not None:
             records = progress(records, total=self.total, desc=self.desc, unit="cloud")
         for rec in records:
             try:
-                cloud = decode_pointcloud2(rec.msg, attributes=self.attributes)
+                cloud = rec.msg if isinstance(rec.msg, CloudArrays) else decode_pointcloud2(rec.msg, attributes=self.attributes)
             except DecodeError as err:
                 self.skipped[f"undecodable cloud: {err.problem}"] += 1
                 continue

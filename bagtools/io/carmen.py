@@ -257,6 +257,7 @@ class CarmenSource:
         msgtypes = {"/odom": ODOM_MSGTYPE, "/tf": TF_MSGTYPE, "/tf_static": TF_MSGTYPE}
         self.topics = {t: TopicInfo(t, msgtypes.get(t, SCAN_MSGTYPE), n) for t, n in counts.items()}
         self.start_ns = records[0][0] if records else 0
+        self.cdr_topics: set[str] = set()  # a CARMEN line is text, decoded by this source
         self.end_ns = records[-1][0] if records else 0
         self.message_count = len(records)
 

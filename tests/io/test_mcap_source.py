@@ -12,6 +12,7 @@ from rosbags.highlevel import AnyReader
 
 from bagtools.errors import BagError
 from bagtools.io import open_bag
+from bagtools.io.mcap_source import iter_segments, scan_mcap
 from tests.conftest import FIXTURES
 
 SOURCE = FIXTURES / "sim_lap_cloud_20s" / "sim_lap_cloud_20s.mcap"
@@ -75,11 +76,16 @@ def test_bad_chunk_is_skipped_with_a_count(how: str, layout: dict, tmp_path: Pat
 
     path = damaged(tmp_path, edit)
     with open_bag(path) as bag:
-        warnings = list(bag.warnings)
+        # The size lie shows in the chunk's head, against the summary: the file is walked at open. A bad
+        # CRC or flipped bits show only in the chunk's data: it is checked, and the damage said, as it is read.
+        checked_at_open = how == "huge_uncompressed_size"
+        assert bool(bag.warnings) == checked_at_open
         got = [(r.topic, r.log_time_ns, bytes(r.raw)) for r in bag.raw_messages()]
-        assert bag.message_count == len(got)
+        warnings = list(bag.warnings)
+        assert (bag.message_count == len(got)) == checked_at_open
     assert len(warnings) == 1 and "damaged MCAP" in warnings[0] and f"chunk at byte {position}" in warnings[0]
-    assert "known to be lost" in warnings[0]
+    assert ("known to be lost" if checked_at_open else "messages are skipped") in warnings[0] \
+        or "is damaged after" in warnings[0]
     reference = layout["reference"]
     assert 0 < len(got) < len(reference)
     if how != "flipped_bits":  # no CRC in this file: flipped records before the detected damage may pass
@@ -126,5 +132,19 @@ def test_every_chunk_bad_is_a_one_line_error(layout: dict, tmp_path: Path) -> No
         for position, _ in layout["chunks"]:
             struct.pack_into("<I", data, position + 9 + 24, 0xDEADBEEF)
 
-    with pytest.raises(BagError, match="damaged MCAP, no message could be read: chunk at byte"):
-        open_bag(damaged(tmp_path, edit))
+    with open_bag(damaged(tmp_path, edit)) as bag:  # the chunks' heads and indexes agree with the summary
+        with pytest.raises(BagError, match="damaged MCAP, no message could be read: chunk at byte"):
+            list(bag.raw_messages())
+    scan = scan_mcap(damaged(tmp_path, edit), verify=True)  # the walk that checks every chunk finds it at once
+    assert scan.message_count == 0 and all("checksum mismatch" in d for d in scan.damage)
+
+
+def test_intact_file_opens_from_its_summary_and_reads_the_same(layout: dict) -> None:
+    fast, walked = scan_mcap(SOURCE, verify=False), scan_mcap(SOURCE, verify=True)
+    assert not fast.verified and walked.verified and not fast.damage
+    assert (fast.counts, fast.start_ns, fast.end_ns, fast.profile, fast.metadata) == (
+        walked.counts, walked.start_ns, walked.end_ns, walked.profile, walked.metadata)
+    assert [(s.offset, s.start_ns, s.n_good, s.channels) for s in fast.segments] == [
+        (s.offset, s.start_ns, s.n_good, s.channels) for s in walked.segments]
+    assert [(m.channel_id, m.log_time, bytes(m.data)) for m in iter_segments(SOURCE, fast, None)] == [
+        (m.channel_id, m.log_time, bytes(m.data)) for m in iter_segments(SOURCE, walked, None)]

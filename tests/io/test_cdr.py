@@ -1,0 +1,105 @@
+"""Scans and clouds decoded straight from CDR bytes are exactly what the rosbags path decodes, or left to it."""
+
+from __future__ import annotations
+
+import dataclasses
+import struct
+
+import numpy as np
+import pytest
+
+from bagtools.io import decode_laserscan, decode_pointcloud2, open_bag
+from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr
+from bagtools.io.decode import DecodeError
+from tests.conftest import FIXTURES, TYPESTORE, make_cloud, make_scan
+
+SCAN = "sensor_msgs/msg/LaserScan"
+CLOUD = "sensor_msgs/msg/PointCloud2"
+
+
+def same(a: object, b: object) -> None:
+    """Two decoded dataclasses hold the same values, arrays bit for bit (NaN where NaN) and of the same dtype."""
+    assert type(a) is type(b)
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            assert x is not None and y is not None and x.dtype == y.dtype and x.shape == y.shape, f.name
+            assert np.array_equal(x, y, equal_nan=True), f.name
+        else:
+            assert x == y, f.name
+
+
+def test_every_scan_and_cloud_of_the_fixtures_decodes_as_rosbags_decodes_it() -> None:
+    checked = {SCAN: 0, CLOUD: 0}
+    for bag_path in (FIXTURES / "sim_lap_cloud_20s", FIXTURES / "sim_random_nocloud_20s"):
+        with open_bag(bag_path) as bag:
+            topics = [t for t, info in bag.topics.items() if info.msgtype in checked]
+            for raw in bag.raw_messages(topics):
+                msg = bag.deserialize(raw).msg
+                if raw.msgtype == SCAN:
+                    same(laserscan_from_cdr(raw.raw), decode_laserscan(msg))
+                else:
+                    for attributes in (False, True):
+                        same(pointcloud2_from_cdr(raw.raw, attributes=attributes),
+                             decode_pointcloud2(msg, attributes=attributes))
+                checked[raw.msgtype] += 1
+    assert checked[SCAN] > 50 and checked[CLOUD] > 10
+
+
+@pytest.mark.parametrize("kind", ["padded rows", "float64 big-endian", "odd frame id"])
+def test_clouds_of_other_layouts_decode_the_same(kind: str) -> None:
+    rng = np.random.default_rng(3)
+    xyz = rng.uniform(-5, 5, (24, 3))
+    xyz[::5] = np.nan
+    msg = {"padded rows": lambda: make_cloud(7, xyz, point_step=20, row_pad=3, height=4),
+           "float64 big-endian": lambda: make_cloud(7, xyz, point_step=32, bigendian=True, dtype="f8"),
+           "odd frame id": lambda: make_cloud(7, xyz, frame_id="cam")}[kind]()
+    raw = TYPESTORE.serialize_cdr(msg, CLOUD)
+    same(pointcloud2_from_cdr(raw), decode_pointcloud2(msg))
+    same(pointcloud2_from_cdr(raw, keep_nan=True), decode_pointcloud2(msg, keep_nan=True))
+
+
+def test_scan_headers_the_decoder_reads_with_notes_give_the_same_notes() -> None:
+    msg = make_scan(5, np.linspace(0.5, 2.0, 90, dtype=np.float32), angle_min=-1.0, increment=0.02)
+    msg.range_min, msg.range_max = -1.0, float("inf")
+    msg.intensities = np.arange(90, dtype=np.float32)
+    msg.header.frame_id = "laser_ü"
+    raw = TYPESTORE.serialize_cdr(msg, SCAN)
+    scan = laserscan_from_cdr(raw)
+    same(scan, decode_laserscan(TYPESTORE.deserialize_cdr(raw, SCAN)))  # the header's floats as recorded: float32
+    assert len(scan.notes) == 2
+
+
+def test_what_the_decoder_must_judge_is_left_to_it() -> None:
+    """Anything but a sound little-endian scan gives None: the caller deserializes it and gets the decoder's
+    own result or error."""
+    good = make_scan(5, np.full(36, 1.0, dtype=np.float32), increment=0.1)
+    zero_increment = make_scan(5, np.full(36, 1.0, dtype=np.float32), increment=0.0)
+    bad_nanosec = make_scan(5, np.full(36, 1.0, dtype=np.float32))
+    bad_nanosec.header.stamp.nanosec = 2_000_000_000
+    raw = TYPESTORE.serialize_cdr(good, SCAN)
+    big_endian = b"\x00\x00" + raw[2:]
+    for case in (TYPESTORE.serialize_cdr(zero_increment, SCAN), TYPESTORE.serialize_cdr(bad_nanosec, SCAN)):
+        assert laserscan_from_cdr(case) is None
+    with pytest.raises(DecodeError):
+        decode_laserscan(zero_increment)
+    assert laserscan_from_cdr(big_endian) is None
+    assert laserscan_from_cdr(raw[:-8]) is None  # cut inside the ranges
+    too_many = bytearray(raw)
+    struct.pack_into("<I", too_many, len(raw) - 4 - 4 * 36 - 4, 10**6)  # the ranges' count points past the end
+    assert laserscan_from_cdr(bytes(too_many)) is None
+    assert laserscan_from_cdr(b"") is None and pointcloud2_from_cdr(raw) is None
+
+
+def test_the_readers_use_the_cdr_path_and_a_bad_message_still_costs_only_itself(tmp_path) -> None:
+    from bagtools.dataset.scans import ScanStream
+    from tests.conftest import write_bag
+
+    messages = [("/scan", SCAN, 10**9 + i, make_scan(10**9 + i, np.full(90, 1.5, dtype=np.float32))) for i in range(4)]
+    zero = make_scan(10**9 + 9, np.full(90, 1.5, dtype=np.float32), increment=0.0)
+    path = write_bag(tmp_path / "bag", messages + [("/scan", SCAN, 10**9 + 9, zero)])
+    with open_bag(path) as bag:
+        stream = ScanStream(bag, "/scan", desc=None)
+        got = list(stream)
+    assert len(got) == 4 and stream.read == 5
+    assert list(stream.skipped) == ["unusable header: LaserScan angle_increment is 0: all 90 beams would point the same way"]
