@@ -1,11 +1,15 @@
 """Mapping with known poses: every cloud of a bag, moved into one fixed frame by tf.
 
-The pipeline reads the bag twice: once for /tf and /tf_static (small), then it
-streams the sensor topic, so memory is bounded by the map, not by the bag:
+The pipeline reads the bag once: the sensor topic and /tf, /tf_static together.
+Each message is cut to range and sampled as it is read and held in its sensor
+frame (:class:`~bagtools.cloudmap.held.HeldClouds`: memory up to a budget, then
+a temporary directory); once all of tf is read and repaired, the held clouds
+are placed and accumulated, so memory is bounded by the map and the budget:
 
     CloudMapPipeline(bag, options).run()
-        _load_tf()          the tf buffer (and arrival times for --stamp latest)
-        _map_clouds()       per message: pose lookup, range cut, sampling, transform, accumulate
+        _read()             one pass: tf collected; per message: range cut, sampling, held
+        _build_tf()         the tf buffer (and arrival times for --stamp latest)
+        _place_clouds()     per held message: pose lookup, transform, accumulate
         _evaluate()         distance of the map to the true world, for simulated bags
 """
 
@@ -20,10 +24,13 @@ from typing import Literal
 import numpy as np
 
 from bagtools.cloudmap.accumulator import MIN_VOXEL_M, MapCloud, PointAccumulator, random_indices
+from bagtools.cloudmap.held import HeldCloud, HeldClouds
 from bagtools.dataset import SensorStream
+from bagtools.dataset.scans import SensorPoints
 from bagtools.io import LaserScanArrays
 from bagtools.errors import BagtoolsError
 from bagtools.io import LASERSCAN_TYPES, BagReader, TfCollector, open_bag
+from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
@@ -139,8 +146,13 @@ class CloudMapPipeline:
         with open_bag(self.bag_path) as bag:
             bag.require_topic(self.options.topic)
             self.warnings = list(bag.warnings)
-            self._load_tf(bag)
-            self._map_clouds(bag)
+            held = HeldClouds()
+            try:
+                collector = self._read(bag, held)
+                self._build_tf(bag, collector)
+                self._place_clouds(held)
+            finally:
+                held.close()
             empty = [f"{self.skipped['empty cloud']} message(s) on {self.options.topic} skipped: no valid point"] \
                 if self.skipped["empty cloud"] else []
             self.warnings = list(dict.fromkeys(list(bag.warnings) + self.warnings + self.stream.warnings() + empty))
@@ -161,10 +173,43 @@ class CloudMapPipeline:
 
     # -- steps -------------------------------------------------------------------
 
-    def _load_tf(self, bag: BagReader) -> None:
+    def _read(self, bag: BagReader, held: HeldClouds) -> TfCollector:
+        """One pass over the sensor topic and tf: each message cut, sampled and held; tf collected."""
+        opts = self.options
+        self.sample = opts.sample if opts.sample is not None else (
+            1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
         collector = TfCollector()
         collector.check(bag)
-        collector.read(bag)
+        self.stream = SensorStream(bag, opts.topic, desc=None, attributes=True)
+        tf_topics = [t for t in collector.topics if t in bag.topics and t != opts.topic]
+        records = bag.messages([opts.topic, *tf_topics], from_cdr={**collector.from_cdr, **self.stream.from_cdr})
+        total = sum(bag.topics[t].count for t in (opts.topic, *tf_topics))
+        for rec in progress(records, total=total, desc="reading", unit="msg"):
+            if rec.topic != opts.topic:
+                collector.add(rec)
+            elif (item := self.stream.decode(rec)) is not None:
+                self._hold(item, held)
+        self.skipped.update(self.stream.skip_counts)
+        return collector
+
+    def _hold(self, item: SensorPoints, held: HeldClouds) -> None:
+        """Range cut and sampling of one message, kept in its sensor frame until tf is known."""
+        self.sensor_frames.add(item.frame_id)
+        self.points_in += item.points.shape[0]
+        if item.points.shape[0] == 0:
+            self.skipped["empty cloud"] += 1
+            return
+        sensed = MapCloud(item.points, item.intensity, item.rgb)
+        if self.options.max_range_m is not None:
+            points = item.points
+            sensed = sensed.select(np.einsum("ij,ij->i", points, points) <= self.options.max_range_m**2)
+        index = random_indices(len(sensed), self.sample, self.rng)
+        if index is not None:
+            sensed = sensed.select(index)
+        held.add(HeldCloud(item.stamp_ns, item.log_time_ns, item.frame_id, sensed,
+                           item.scan if self.keep_inputs else None))
+
+    def _build_tf(self, bag: BagReader, collector: TfCollector) -> None:
         dynamic, static = collector.arrays()
         arrival_ns = collector.dynamic_arrival_ns()
         dynamic, kept = repair_dynamic_tf(dynamic, self.warnings)
@@ -209,29 +254,15 @@ class CloudMapPipeline:
             self._base_of[tf_frame] = T
         return self._base_of[tf_frame]
 
-    def _map_clouds(self, bag: BagReader) -> None:
-        opts = self.options
-        self.sample = opts.sample if opts.sample is not None else (
-            1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
-        self.stream = SensorStream(bag, opts.topic, desc="mapping", attributes=True)
-        for item in self.stream:
-            self.sensor_frames.add(item.frame_id)
-            self.points_in += item.points.shape[0]
-            if item.points.shape[0] == 0:
-                self.skipped["empty cloud"] += 1
-                continue
+    def _place_clouds(self, held: HeldClouds) -> None:
+        """Each held message placed by tf, transformed into the map's frame and accumulated."""
+        for item in progress(held, total=held.count, desc="mapping", unit="msg"):
             try:
                 T_frame_sensor, tf_frame, stamp_used = self._pose(item.frame_id, item.stamp_ns, item.log_time_ns)
             except TransformException as err:
                 self.skipped[_skip_reason(err)] += 1
                 continue
-            sensed = MapCloud(item.points, item.intensity, item.rgb)
-            if opts.max_range_m is not None:
-                points = item.points
-                sensed = sensed.select(np.einsum("ij,ij->i", points, points) <= opts.max_range_m**2)
-            index = random_indices(len(sensed), self.sample, self.rng)
-            if index is not None:
-                sensed = sensed.select(index)
+            sensed = item.cloud
             R, t = T_frame_sensor[:3, :3], T_frame_sensor[:3, 3]
             self.accumulator.add((sensed.points.astype(np.float64) @ R.T + t).astype(np.float32), sensed.intensity,
                                  sensed.rgb)
@@ -242,7 +273,6 @@ class CloudMapPipeline:
                 self.inputs.append(PlacedInput(item.stamp_ns, item.frame_id, sensed.points, sensed.intensity, sensed.rgb,
                                                item.scan, T_frame_sensor,
                                                self.base_frame if T_base_sensor is not None else None, T_base_sensor))
-        self.skipped.update(self.stream.skip_counts)
 
     def _evaluate(self, bag: BagReader, points: np.ndarray) -> dict:
         """For a simulated bag: distances of the map's points to the true world surfaces.

@@ -21,7 +21,7 @@ it here, in bag order, the way KISS-ICP's datasets feed its pipeline:
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from functools import partial
 
@@ -39,6 +39,7 @@ from bagtools.io import (
 )
 from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr
 from bagtools.io.decode import CloudArrays, DecodeError
+from bagtools.io.reader import Record
 from bagtools.progress import progress
 
 SKIP_BACKWARDS = "stamp not after the previous scan"
@@ -127,33 +128,45 @@ class ScanStream:
         self.notes: Counter[str] = Counter()
         self.frame_ids: set[str] = set()
         self._first_backwards_ns: int | None = None
+        self._last_ns: int | None = None  # the last usable scan's stamp
 
     def __iter__(self) -> Iterator[ScanMessage]:
-        last_ns: int | None = None
-        records = self.bag.messages([self.topic], from_cdr=laserscan_from_cdr)
+        records = self.bag.messages([self.topic], from_cdr=self.from_cdr)
         if self.desc is not None:
             records = progress(records, total=self.total, desc=self.desc, unit="scan")
         for rec in records:
-            self.read += 1
-            try:
-                scan = rec.msg if isinstance(rec.msg, LaserScanArrays) else decode_laserscan(rec.msg)
-            except DecodeError as err:
-                self.skipped[f"unusable header: {err.problem}"] += 1
-                continue
-            if scan.notes:
-                self.notes.update(scan.notes)
-            if self.increasing and last_ns is not None and scan.stamp_ns <= last_ns:
-                self.skipped[SKIP_BACKWARDS] += 1
-                if self._first_backwards_ns is None:
-                    self._first_backwards_ns = scan.stamp_ns
-                continue
-            if self.min_returns and int(np.count_nonzero(scan.valid)) < self.min_returns:
-                self.skipped[f"fewer than {self.min_returns} valid ranges"] += 1
-                continue
-            self.frame_ids.add(scan.frame_id)
-            last_ns = scan.stamp_ns
-            seq = getattr(getattr(rec.msg, "header", None), "seq", None)  # ROS 1 numbers its messages
-            yield ScanMessage(rec.log_time_ns, scan, None if seq is None else int(seq))
+            item = self.decode(rec)
+            if item is not None:
+                yield item
+
+    @property
+    def from_cdr(self) -> dict[str, Callable[[bytes | memoryview], LaserScanArrays | None]]:
+        """The topic's CDR decoder, for :meth:`~bagtools.io.BagReader.messages` (a pass over several topics
+        feeds this stream's records to :meth:`decode`)."""
+        return {self.topic: laserscan_from_cdr}
+
+    def decode(self, rec: Record) -> ScanMessage | None:
+        """One record of the topic as a usable scan, or None when it is skipped (and counted)."""
+        self.read += 1
+        try:
+            scan = rec.msg if isinstance(rec.msg, LaserScanArrays) else decode_laserscan(rec.msg)
+        except DecodeError as err:
+            self.skipped[f"unusable header: {err.problem}"] += 1
+            return None
+        if scan.notes:
+            self.notes.update(scan.notes)
+        if self.increasing and self._last_ns is not None and scan.stamp_ns <= self._last_ns:
+            self.skipped[SKIP_BACKWARDS] += 1
+            if self._first_backwards_ns is None:
+                self._first_backwards_ns = scan.stamp_ns
+            return None
+        if self.min_returns and int(np.count_nonzero(scan.valid)) < self.min_returns:
+            self.skipped[f"fewer than {self.min_returns} valid ranges"] += 1
+            return None
+        self.frame_ids.add(scan.frame_id)
+        self._last_ns = scan.stamp_ns
+        seq = getattr(getattr(rec.msg, "header", None), "seq", None)  # ROS 1 numbers its messages
+        return ScanMessage(rec.log_time_ns, scan, None if seq is None else int(seq))
 
     def warnings(self) -> list[str]:
         """One line per kind of skipped scan and per kind of implausible header value, with counts."""
@@ -211,31 +224,45 @@ class SensorStream:
         self.implausible_points = 0
 
     def __iter__(self) -> Iterator[SensorPoints]:
-        if self.scans is not None:
-            for item in self.scans:
-                scan = item.scan
-                xy = scan.points_xy()
-                points = np.zeros((xy.shape[0], 3), dtype=np.float32)
-                points[:, :2] = xy
-                intensity = None
-                if self.attributes and scan.intensities.size == scan.ranges_m.size and scan.ranges_m.size:
-                    intensity = np.asarray(scan.intensities[scan.valid], dtype=np.float32)
-                yield SensorPoints(scan.stamp_ns, item.log_time_ns, scan.frame_id, points, intensity,
-                                   scan=scan if self.attributes else None)
-            return
-        records: Iterable = self.bag.messages([self.topic], from_cdr=partial(pointcloud2_from_cdr,
-                                                                           attributes=self.attributes))
+        records: Iterable = self.bag.messages([self.topic], from_cdr=self.from_cdr)
         if self.desc is not None:
-            records = progress(records, total=self.total, desc=self.desc, unit="cloud")
+            records = progress(records, total=self.total, desc=self.desc, unit="scan" if self.is_scan else "cloud")
         for rec in records:
-            try:
-                cloud = rec.msg if isinstance(rec.msg, CloudArrays) else decode_pointcloud2(rec.msg, attributes=self.attributes)
-            except DecodeError as err:
-                self.skipped[f"undecodable cloud: {err.problem}"] += 1
-                continue
-            self.implausible_points += cloud.n_implausible
-            self.notes.update(cloud.notes)
-            yield SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points, cloud.intensity, cloud.rgb)
+            item = self.decode(rec)
+            if item is not None:
+                yield item
+
+    @property
+    def from_cdr(self) -> dict[str, Callable[[bytes | memoryview], object]]:
+        """The topic's CDR decoder, for :meth:`~bagtools.io.BagReader.messages` (a pass over several topics
+        feeds this stream's records to :meth:`decode`)."""
+        if self.scans is not None:
+            return self.scans.from_cdr
+        return {self.topic: partial(pointcloud2_from_cdr, attributes=self.attributes)}
+
+    def decode(self, rec: Record) -> SensorPoints | None:
+        """One record of the topic as points, or None when it is skipped (and counted)."""
+        if self.scans is not None:
+            item = self.scans.decode(rec)
+            if item is None:
+                return None
+            scan = item.scan
+            xy = scan.points_xy()
+            points = np.zeros((xy.shape[0], 3), dtype=np.float32)
+            points[:, :2] = xy
+            intensity = None
+            if self.attributes and scan.intensities.size == scan.ranges_m.size and scan.ranges_m.size:
+                intensity = np.asarray(scan.intensities[scan.valid], dtype=np.float32)
+            return SensorPoints(scan.stamp_ns, item.log_time_ns, scan.frame_id, points, intensity,
+                                scan=scan if self.attributes else None)
+        try:
+            cloud = rec.msg if isinstance(rec.msg, CloudArrays) else decode_pointcloud2(rec.msg, attributes=self.attributes)
+        except DecodeError as err:
+            self.skipped[f"undecodable cloud: {err.problem}"] += 1
+            return None
+        self.implausible_points += cloud.n_implausible
+        self.notes.update(cloud.notes)
+        return SensorPoints(cloud.stamp_ns, rec.log_time_ns, cloud.frame_id, cloud.points, cloud.intensity, cloud.rgb)
 
     @property
     def skip_counts(self) -> Counter[str]:

@@ -28,6 +28,7 @@ from bagtools.io.decode import (
     CloudArrays,
     DecodeError,
     LaserScanArrays,
+    TfRows,
     _scan_geometry,
     decode_pointcloud2,
 )
@@ -186,3 +187,42 @@ def pointcloud2_from_cdr(raw: bytes | memoryview, keep_nan: bool = False, attrib
     except DecodeError:
         return None
 
+
+
+_TRANSFORM = struct.Struct("<7d")  # translation x, y, z; rotation x, y, z, w
+
+
+def tf_from_cdr(raw: bytes | memoryview) -> TfRows | None:
+    """tf2_msgs/msg/TFMessage CDR bytes -> :class:`~bagtools.io.decode.TfRows` (as
+    :func:`~bagtools.io.decode.tf_rows` gives for the deserialized message), or None when malformed."""
+    size = len(raw)
+    if size < 8 or raw[0] != 0 or raw[1] != 1:
+        return None
+    (n,) = _U32.unpack_from(raw, 4)
+    pos = 8
+    rows = []
+    for _ in range(n):
+        pos = 4 + ((pos - 4 + 3) & ~3)
+        if pos + _STAMP_AND_LENGTH.size > size:
+            return None
+        sec, nanosec, length = _STAMP_AND_LENGTH.unpack_from(raw, pos)
+        pos += _STAMP_AND_LENGTH.size
+        parent = _cdr_text(raw, pos, length)
+        pos = 4 + ((pos + length - 4 + 3) & ~3)
+        if parent is None or pos + 4 > size or not 0 <= nanosec < 1_000_000_000:
+            return None
+        (length,) = _U32.unpack_from(raw, pos)
+        child = _cdr_text(raw, pos + 4, length)
+        pos = 4 + ((pos + 4 + length - 4 + 7) & ~7)
+        if child is None or pos + _TRANSFORM.size > size:
+            return None
+        rows.append((parent, child, sec * 1_000_000_000 + nanosec, *_TRANSFORM.unpack_from(raw, pos)))
+        pos += _TRANSFORM.size
+    return TfRows(rows)
+
+
+def _cdr_text(raw: bytes | memoryview, pos: int, length: int) -> str | None:
+    """The CDR string of ``length`` bytes (its NUL included) at ``pos``, or None when malformed."""
+    if length == 0 or pos + length > len(raw) or raw[pos + length - 1] != 0:
+        return None
+    return _frame_id(bytes(raw[pos:pos + length - 1]))

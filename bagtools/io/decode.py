@@ -419,18 +419,41 @@ class TfArrays:
         )
 
 
-def decode_tf_message(msg: Any) -> TfArrays:
-    """tf2_msgs/TFMessage (ROS 2) or tf/tfMessage (ROS 1) -> :class:`TfArrays`."""
-    transforms = msg.transforms
-    n = len(transforms)
+class TfRows(tuple):
+    """The transforms of one TFMessage as rows (parent, child, stamp_ns, tx, ty, tz, qx, qy, qz, qw): frame ids as
+    recorded, int nanoseconds, metres, a ROS-order quaternion. Collected by the thousand, made arrays once."""
+
+
+def tf_rows(msg: Any) -> TfRows:
+    """tf2_msgs/TFMessage (ROS 2) or tf/tfMessage (ROS 1) -> :class:`TfRows`."""
+    rows = []
+    for ts in msg.transforms:
+        t, q = ts.transform.translation, ts.transform.rotation
+        rows.append((ts.header.frame_id, ts.child_frame_id, stamp_to_ns(ts.header.stamp),
+                     float(t.x), float(t.y), float(t.z), float(q.x), float(q.y), float(q.z), float(q.w)))
+    return TfRows(rows)
+
+
+def tf_arrays(rows: list[tuple] | TfRows, publishers: list[str] | None = None) -> TfArrays:
+    """:class:`TfArrays` of transform rows (see :class:`TfRows`); ``publishers`` (one per row) are kept when
+    any is known."""
+    n = len(rows)
+    if n == 0:
+        return TfArrays.empty()
     parent = np.empty(n, dtype=object)
     child = np.empty(n, dtype=object)
-    stamps = np.empty(n, dtype=np.int64)
-    values = np.empty((n, 7))
-    for i, ts in enumerate(transforms):
-        parent[i] = ts.header.frame_id
-        child[i] = ts.child_frame_id
-        stamps[i] = stamp_to_ns(ts.header.stamp)
-        t, q = ts.transform.translation, ts.transform.rotation
-        values[i] = (t.x, t.y, t.z, q.x, q.y, q.z, q.w)
-    return TfArrays(parent, child, stamps, values[:, :3], values[:, 3:])
+    columns = list(zip(*rows))
+    parent[:] = columns[0]
+    child[:] = columns[1]
+    stamps = np.array(columns[2], dtype=np.int64)
+    values = np.column_stack([np.asarray(c, dtype=np.float64) for c in columns[3:]])
+    marked = None
+    if publishers is not None and any(publishers):
+        marked = np.empty(n, dtype=object)
+        marked[:] = publishers
+    return TfArrays(parent, child, stamps, values[:, :3], values[:, 3:], marked)
+
+
+def decode_tf_message(msg: Any) -> TfArrays:
+    """tf2_msgs/TFMessage (ROS 2) or tf/tfMessage (ROS 1) -> :class:`TfArrays`."""
+    return tf_arrays(tf_rows(msg))

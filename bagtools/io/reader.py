@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import heapq
 import struct
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -514,22 +514,24 @@ class BagReader:
         return Record(rec.topic, rec.msgtype, rec.log_time_ns, msg, rec.publisher)
 
     def messages(self, topics: Iterable[str] | None = None,
-                 from_cdr: Callable[[bytes | memoryview], Any] | None = None) -> Iterator[Record]:
+                 from_cdr: Mapping[str, Callable[[bytes | memoryview], Any]] | None = None) -> Iterator[Record]:
         """Yield deserialized messages of ``topics`` (all if None) in bag-time order.
 
         A message that cannot be decoded (damaged bytes) is skipped; how many,
         per topic, is added to :attr:`warnings` when the iteration ends.
-        ``from_cdr`` (e.g. :func:`bagtools.io.cdr.laserscan_from_cdr`, for topics
-        of its one type) decodes a message stored as CDR straight from its bytes:
-        what it returns is the record's ``msg``; where it returns None, the
-        message is deserialized as usual.
+        ``from_cdr`` maps topics to decoders of their CDR bytes (e.g.
+        :func:`bagtools.io.cdr.laserscan_from_cdr` for a LaserScan topic): a
+        message of such a topic stored as CDR is decoded straight from its bytes,
+        and what the decoder returns is the record's ``msg``; where it returns
+        None, the message is deserialized as usual.
         """
         failed: dict[str, int] = {}
         first_error = ""
-        cdr_topics = self._source.cdr_topics if from_cdr is not None else ()
+        fast = {t: d for t, d in (from_cdr or {}).items() if t in self._source.cdr_topics}
         try:
             for rec in self.raw_messages(topics):
-                if rec.topic in cdr_topics and (decoded := from_cdr(rec.raw)) is not None:
+                decode = fast.get(rec.topic)
+                if decode is not None and (decoded := decode(rec.raw)) is not None:
                     yield Record(rec.topic, rec.msgtype, rec.log_time_ns, decoded, rec.publisher)
                     continue
                 try:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
-from bagtools.io.decode import TF_TYPES, TfArrays, decode_tf_message
+from bagtools.io.cdr import tf_from_cdr
+from bagtools.io.decode import TF_TYPES, TfArrays, TfRows, tf_arrays, tf_rows
 from bagtools.io.reader import BagReader, Record
 from bagtools.progress import progress
 
@@ -22,8 +25,9 @@ class TfCollector:
     def __init__(self, tf_topic: str = TF_TOPIC, static_topic: str = TF_STATIC_TOPIC) -> None:
         self.tf_topic = tf_topic
         self.static_topic = static_topic
-        self._dynamic: list[TfArrays] = []
-        self._static: list[TfArrays] = []
+        self._dynamic: list[tuple] = []  # TfRows rows, in bag order
+        self._static: list[tuple] = []
+        self._publishers: list[str] = []  # of each dynamic row
         self._dynamic_arrival_ns: list[int] = []
 
     @property
@@ -40,21 +44,31 @@ class TfCollector:
         """Read every message of the tf topics the bag has (with a progress bar)."""
         present = [t for t in self.topics if t in bag.topics]
         total = sum(bag.topics[t].count for t in present)
-        for rec in progress(bag.messages(present), total=total, desc="reading tf", unit="msg"):
+        records = bag.messages(present, from_cdr=self.from_cdr)
+        for rec in progress(records, total=total, desc="reading tf", unit="msg"):
             self.add(rec)
 
+    @property
+    def from_cdr(self) -> dict[str, Callable[[bytes | memoryview], TfRows | None]]:
+        """The CDR decoder of each tf topic, for :meth:`~bagtools.io.BagReader.messages`."""
+        return {topic: tf_from_cdr for topic in self.topics}
+
     def add(self, rec: Record) -> None:
-        """Decode a record of one of the tf topics (others are ignored)."""
+        """Collect a record of one of the tf topics (others are ignored): a deserialized message, or the
+        :class:`~bagtools.io.decode.TfRows` of :func:`~bagtools.io.cdr.tf_from_cdr`."""
+        if rec.topic not in self.topics:
+            return
+        rows = rec.msg if isinstance(rec.msg, TfRows) else tf_rows(rec.msg)
         if rec.topic == self.static_topic:
-            self._static.append(decode_tf_message(rec.msg))
-        elif rec.topic == self.tf_topic:
-            arrays = decode_tf_message(rec.msg).published_by(rec.publisher)
-            self._dynamic.append(arrays)
-            self._dynamic_arrival_ns.extend([rec.log_time_ns] * len(arrays))
+            self._static.extend(rows)
+        else:
+            self._dynamic.extend(rows)
+            self._publishers.extend([rec.publisher] * len(rows))
+            self._dynamic_arrival_ns.extend([rec.log_time_ns] * len(rows))
 
     def arrays(self) -> tuple[TfArrays, TfArrays]:
         """(dynamic, static) transforms collected so far, each in bag-time order."""
-        return TfArrays.concatenate(self._dynamic), TfArrays.concatenate(self._static)
+        return tf_arrays(self._dynamic, self._publishers), tf_arrays(self._static)
 
     def dynamic_arrival_ns(self) -> np.ndarray:
         """(N,) int64 bag (arrival) time of each dynamic transform, aligned with ``arrays()[0]``."""

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from bagtools.io import decode_laserscan, decode_pointcloud2, open_bag
-from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr
-from bagtools.io.decode import DecodeError
-from tests.conftest import FIXTURES, TYPESTORE, make_cloud, make_scan
+from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr, tf_from_cdr
+from bagtools.io.decode import DecodeError, tf_rows
+from tests.conftest import FIXTURES, TYPESTORE, make_cloud, make_scan, make_tf
 
 SCAN = "sensor_msgs/msg/LaserScan"
 CLOUD = "sensor_msgs/msg/PointCloud2"
@@ -103,3 +103,23 @@ def test_the_readers_use_the_cdr_path_and_a_bad_message_still_costs_only_itself(
         got = list(stream)
     assert len(got) == 4 and stream.read == 5
     assert list(stream.skipped) == ["unusable header: LaserScan angle_increment is 0: all 90 beams would point the same way"]
+
+
+def test_every_tf_message_of_the_fixtures_decodes_as_rosbags_decodes_it() -> None:
+    n = 0
+    for bag_path in (FIXTURES / "sim_lap_cloud_20s", FIXTURES / "sim_random_nocloud_20s"):
+        with open_bag(bag_path) as bag:
+            for raw in bag.raw_messages(["/tf", "/tf_static"]):
+                assert tf_from_cdr(raw.raw) == tf_rows(bag.deserialize(raw).msg)
+                n += 1
+    assert n > 100
+
+
+def test_tf_messages_of_odd_frame_ids_and_many_transforms_decode_the_same() -> None:
+    T = TYPESTORE.types
+    transforms = [make_tf(10**9 + i, "odom" * i or "m", "base_ü" + "x" * i, (i, -2.5, 1e-9), (0, 0, 0.6, 0.8)).transforms[0]
+                  for i in range(6)]
+    raw = TYPESTORE.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=transforms), "tf2_msgs/msg/TFMessage")
+    assert tf_from_cdr(raw) == tf_rows(TYPESTORE.deserialize_cdr(raw, "tf2_msgs/msg/TFMessage"))
+    assert len(tf_from_cdr(raw)) == 6
+    assert tf_from_cdr(raw[:-9]) is None and tf_from_cdr(b"\x00\x00" + raw[2:]) is None
