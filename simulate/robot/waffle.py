@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from bagtools.transforms import axang2quat, quat2xyzw, quatconj, quatmultiply
 
 WHEEL_SEPARATION_M = 0.287
 WHEEL_RADIUS_M = 0.033
@@ -39,20 +40,41 @@ class Joint:
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
     @property
+    def quat_wxyz(self) -> np.ndarray:
+        """The origin's rotation as a quaternion [w x y z] (URDF rpy: fixed axes, roll about x first)."""
+        return _rpy_quat(self.rpy_rad)
+
+    @property
     def quat_xyzw(self) -> tuple[float, float, float, float]:
         """The origin's rotation as a quaternion x, y, z, w (URDF rpy: fixed axes, roll about x first)."""
-        x, y, z, w = Rotation.from_euler("xyz", self.rpy_rad).as_quat()
+        x, y, z, w = quat2xyzw(self.quat_wxyz)
         return (float(x), float(y), float(z), float(w))
 
     def matrix(self, angle_rad: float = 0.0) -> np.ndarray:
         """The 4x4 T_parent_child at joint position ``angle_rad`` (0 for fixed joints)."""
-        T = np.eye(4)
-        R = Rotation.from_euler("xyz", self.rpy_rad)
+        quat = self.quat_wxyz
         if self.kind != "fixed" and angle_rad != 0.0:
-            R = R * Rotation.from_rotvec(np.asarray(self.axis) * angle_rad)
-        T[:3, :3] = R.as_matrix()
+            quat = quatmultiply(quat, axang2quat([*self.axis, angle_rad]))
+        T = np.eye(4)
+        T[:3, :3] = _quat_matrix(quat)
         T[:3, 3] = self.xyz_m
         return T
+
+
+def _rpy_quat(rpy_rad: tuple[float, float, float]) -> np.ndarray:
+    """URDF rpy (roll about fixed x, then pitch about fixed y, then yaw about fixed z) -> quaternion [w x y z].
+
+    The Hamilton product q_z(yaw) q_y(pitch) q_x(roll), in scipy's ``from_euler("xyz", rpy)`` order.
+    """
+    roll, pitch, yaw = rpy_rad
+    return quatmultiply(axang2quat([0.0, 0.0, 1.0, yaw]),
+                        quatmultiply(axang2quat([0.0, 1.0, 0.0, pitch]), axang2quat([1.0, 0.0, 0.0, roll])))
+
+
+def _quat_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) of a unit quaternion [w x y z]: its columns are the axes rotated, q e_i q*."""
+    axes = np.hstack([np.zeros((3, 1)), np.eye(3)])  # e_x, e_y, e_z as pure quaternions
+    return quatmultiply(quatmultiply(quat_wxyz, axes), quatconj(quat_wxyz))[:, 1:].T
 
 
 _OPTICAL_RPY = (-1.57, 0.0, -1.57)  # as in the URDF: z forward, x right, y down
@@ -95,8 +117,9 @@ def T_base_footprint_frame(frame: str, wheel_angles_rad: dict[str, float] | None
 
 def wheel_quats_xyzw(joint: Joint, angles_rad: np.ndarray) -> np.ndarray:
     """Rotations (N, 4) x, y, z, w of T_base_link_wheel at wheel angles (N,) rad, as robot_state_publisher computes them."""
-    R = Rotation.from_euler("xyz", joint.rpy_rad) * Rotation.from_rotvec(np.outer(angles_rad, joint.axis))
-    return R.as_quat()
+    angles = np.asarray(angles_rad, dtype=float).reshape(-1)
+    turns = axang2quat(np.column_stack([np.broadcast_to(joint.axis, (len(angles), 3)), angles]))
+    return quat2xyzw(quatmultiply(joint.quat_wxyz, turns))
 
 
 def urdf_text() -> str:
