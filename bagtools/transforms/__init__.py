@@ -40,6 +40,11 @@ unknown Euler sequence.
 Planar helpers: :func:`pose2tform`/:func:`tform2pose` between [x y theta] and
 4x4 transforms, :func:`pose2tform2d`/:func:`tform2d2pose` for 3x3 2D homogeneous
 transforms, and :func:`wrap_to_pi` (to (-pi, pi]).
+
+scipy (whose ``scipy.spatial`` takes ~0.2 s to import) is imported by the functions
+that use its ``Rotation``, on first call; the planar helpers and the quaternion
+algebra (``quatmultiply``, ``quatconj``, ``quatinv``, ``axang2quat``, ``quat2axang``,
+``xyzw2quat``, ``quat2xyzw``) never import it.
 """
 
 from bagtools.transforms.axisangle import axang2rotm, axang2tform, rotm2axang, tform2axang

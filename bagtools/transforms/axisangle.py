@@ -7,7 +7,6 @@ and an angle theta in radians, right-handed about the axis.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from bagtools.transforms.checks import as_stack, check_nonzero, check_rotations, check_tforms
 from bagtools.transforms.quaternions import quats_to_axang, rotation_to_wxyz
@@ -15,6 +14,8 @@ from bagtools.transforms.rotations import rotations_to_tforms, unstack
 
 
 def _axang_rotations(axang: object) -> tuple[np.ndarray, bool]:
+    from scipy.spatial.transform import Rotation
+
     axang_arr, single = as_stack(axang, "axang", (4,))
     axis_norm = check_nonzero(axang_arr[:, :3], "axang", single, "rotation axis")
     rotvec = axang_arr[:, :3] * (axang_arr[:, 3] / axis_norm)[:, None]
@@ -22,6 +23,8 @@ def _axang_rotations(axang: object) -> tuple[np.ndarray, bool]:
 
 
 def _rotations_axang(rotm: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
     # Through the canonical (w >= 0) quaternion: theta in [0, pi], and at exactly pi
     # the axis has its first nonzero component positive (Rx(pi) -> [1 0 0 pi], as MATLAB).
     return quats_to_axang(rotation_to_wxyz(Rotation.from_matrix(rotm)))

@@ -9,8 +9,9 @@ At the ROS boundary (x, y, z, w) use :func:`xyzw2quat` and :func:`quat2xyzw`.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from bagtools.transforms.checks import (
     as_stack,
@@ -22,12 +23,17 @@ from bagtools.transforms.checks import (
 )
 from bagtools.transforms.rotations import rotations_to_eul, rotations_to_tforms, unstack
 
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
+
 # MATLAB's zero-angle threshold in quat2axang: |theta| below this gives the axis [0 0 1].
 _ZERO_ANGLE_TOL = 10 * np.finfo(np.float64).eps
 
 
 def wxyz_to_rotation(quat: np.ndarray) -> Rotation:
     """(N,4) nonzero [w x y z] quaternions -> scipy Rotation (scipy normalizes them)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_quat(quat[:, [1, 2, 3, 0]])
 
 
@@ -93,6 +99,8 @@ def rotm2quat(rotm: np.ndarray) -> np.ndarray:
 
     For a 180-degree rotation (w = 0) the first nonzero of x, y, z is positive.
     """
+    from scipy.spatial.transform import Rotation
+
     rotm_arr, single = as_stack(rotm, "rotm", (3, 3))
     check_rotations(rotm_arr, "rotm", single)
     return unstack(rotation_to_wxyz(Rotation.from_matrix(rotm_arr)), single)
@@ -106,6 +114,8 @@ def quat2tform(quat: np.ndarray) -> np.ndarray:
 
 def tform2quat(tform: np.ndarray) -> np.ndarray:
     """Transform (4,4)/(N,4,4) -> unit quaternion [w x y z] (4,)/(N,4) of its rotation, w >= 0."""
+    from scipy.spatial.transform import Rotation
+
     tform_arr, single = as_stack(tform, "tform", (4, 4))
     check_tforms(tform_arr, "tform", single)
     return unstack(rotation_to_wxyz(Rotation.from_matrix(tform_arr[:, :3, :3])), single)
@@ -117,6 +127,8 @@ def eul2quat(eul: np.ndarray, seq: str = "ZYX") -> np.ndarray:
     The quaternion is the Hamilton product of the three elementary half-angle
     quaternions (as MATLAB), so w may be negative.
     """
+    from scipy.spatial.transform import Rotation
+
     seq = check_seq(seq)
     eul_arr, single = as_stack(eul, "eul", (3,))
     quat_xyzw = np.atleast_2d(Rotation.from_euler(seq, eul_arr).as_quat())

@@ -8,7 +8,6 @@ a stack in, a stack out.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from bagtools.transforms.checks import as_stack, check_rotations, check_seq, check_tforms
 
@@ -60,6 +59,8 @@ def tform2rotm(tform: np.ndarray) -> np.ndarray:
 
 def eul_to_rotations(eul: np.ndarray, seq: str) -> np.ndarray:
     """(N,3) Euler angles in radians, intrinsic ``seq`` (upper case) -> (N,3,3) rotations (no checks)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_euler(seq, eul).as_matrix()
 
 

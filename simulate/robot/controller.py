@@ -110,8 +110,8 @@ def drive(path_xy: np.ndarray, start_xyyaw: tuple[float, float, float], n_steps:
             if abs(kappa) * v_des > limits.max_angular_radps:
                 v_des = limits.max_angular_radps / abs(kappa)
             w_des = v_des * kappa
-        v = float(np.clip(v_des, v - dv_max, v + dv_max))
-        w = float(np.clip(w_des, w - dw_max, w + dw_max))
+        v = float(min(max(v_des, v - dv_max), v + dv_max))  # clamps on Python floats: np.clip costs ~5 us a call
+        w = float(min(max(w_des, w - dw_max), w + dw_max))
         v = min(max(v, -limits.max_linear_mps), limits.max_linear_mps)
         w = min(max(w, -limits.max_angular_radps), limits.max_angular_radps)
         v_cmd[k], w_cmd[k] = v, w

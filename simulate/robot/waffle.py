@@ -10,10 +10,11 @@ there (e.g. -1.57, not -pi/2), so the frames are the ones a real Waffle publishe
 from __future__ import annotations
 
 from dataclasses import dataclass
-from xml.sax.saxutils import quoteattr
+from html import escape
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from bagtools.transforms import axang2quat, quat2xyzw, quatconj, quatmultiply
 
 WHEEL_SEPARATION_M = 0.287
 WHEEL_RADIUS_M = 0.033
@@ -39,20 +40,41 @@ class Joint:
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
     @property
+    def quat_wxyz(self) -> np.ndarray:
+        """The origin's rotation as a quaternion [w x y z] (URDF rpy: fixed axes, roll about x first)."""
+        return _rpy_quat(self.rpy_rad)
+
+    @property
     def quat_xyzw(self) -> tuple[float, float, float, float]:
         """The origin's rotation as a quaternion x, y, z, w (URDF rpy: fixed axes, roll about x first)."""
-        x, y, z, w = Rotation.from_euler("xyz", self.rpy_rad).as_quat()
+        x, y, z, w = quat2xyzw(self.quat_wxyz)
         return (float(x), float(y), float(z), float(w))
 
     def matrix(self, angle_rad: float = 0.0) -> np.ndarray:
         """The 4x4 T_parent_child at joint position ``angle_rad`` (0 for fixed joints)."""
-        T = np.eye(4)
-        R = Rotation.from_euler("xyz", self.rpy_rad)
+        quat = self.quat_wxyz
         if self.kind != "fixed" and angle_rad != 0.0:
-            R = R * Rotation.from_rotvec(np.asarray(self.axis) * angle_rad)
-        T[:3, :3] = R.as_matrix()
+            quat = quatmultiply(quat, axang2quat([*self.axis, angle_rad]))
+        T = np.eye(4)
+        T[:3, :3] = _quat_matrix(quat)
         T[:3, 3] = self.xyz_m
         return T
+
+
+def _rpy_quat(rpy_rad: tuple[float, float, float]) -> np.ndarray:
+    """URDF rpy (roll about fixed x, then pitch about fixed y, then yaw about fixed z) -> quaternion [w x y z].
+
+    The Hamilton product q_z(yaw) q_y(pitch) q_x(roll), in scipy's ``from_euler("xyz", rpy)`` order.
+    """
+    roll, pitch, yaw = rpy_rad
+    return quatmultiply(axang2quat([0.0, 0.0, 1.0, yaw]),
+                        quatmultiply(axang2quat([0.0, 1.0, 0.0, pitch]), axang2quat([1.0, 0.0, 0.0, roll])))
+
+
+def _quat_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) of a unit quaternion [w x y z]: its columns are the axes rotated, q e_i q*."""
+    axes = np.hstack([np.zeros((3, 1)), np.eye(3)])  # e_x, e_y, e_z as pure quaternions
+    return quatmultiply(quatmultiply(quat_wxyz, axes), quatconj(quat_wxyz))[:, 1:].T
 
 
 _OPTICAL_RPY = (-1.57, 0.0, -1.57)  # as in the URDF: z forward, x right, y down
@@ -95,8 +117,14 @@ def T_base_footprint_frame(frame: str, wheel_angles_rad: dict[str, float] | None
 
 def wheel_quats_xyzw(joint: Joint, angles_rad: np.ndarray) -> np.ndarray:
     """Rotations (N, 4) x, y, z, w of T_base_link_wheel at wheel angles (N,) rad, as robot_state_publisher computes them."""
-    R = Rotation.from_euler("xyz", joint.rpy_rad) * Rotation.from_rotvec(np.outer(angles_rad, joint.axis))
-    return R.as_quat()
+    angles = np.asarray(angles_rad, dtype=float).reshape(-1)
+    turns = axang2quat(np.column_stack([np.broadcast_to(joint.axis, (len(angles), 3)), angles]))
+    return quat2xyzw(quatmultiply(joint.quat_wxyz, turns))
+
+
+def _quoteattr(value: str) -> str:
+    """``value`` as a double-quoted XML attribute value (html.escape: xml.sax.saxutils would import urllib, ~10 ms)."""
+    return f'"{escape(value, quote=True)}"'
 
 
 def urdf_text() -> str:
@@ -108,18 +136,18 @@ def urdf_text() -> str:
         return " ".join(f"{v:g}" for v in values)
 
     links = ["base_footprint"] + [j.child for j in JOINTS]
-    lines = ['<?xml version="1.0" ?>', f"<robot name={quoteattr(ROBOT_NAME)}>"]
+    lines = ['<?xml version="1.0" ?>', f"<robot name={_quoteattr(ROBOT_NAME)}>"]
     for link in links:
         if link in ("wheel_left_link", "wheel_right_link"):
-            lines += [f"  <link name={quoteattr(link)}>", "    <collision>", '      <origin xyz="0 0 0" rpy="0 0 0"/>',
+            lines += [f"  <link name={_quoteattr(link)}>", "    <collision>", '      <origin xyz="0 0 0" rpy="0 0 0"/>',
                       f'      <geometry><cylinder length="0.018" radius="{WHEEL_RADIUS_M:g}"/></geometry>',
                       "    </collision>", "  </link>"]
         else:
-            lines.append(f"  <link name={quoteattr(link)}/>")
+            lines.append(f"  <link name={_quoteattr(link)}/>")
     for j in JOINTS:
-        lines += [f"  <joint name={quoteattr(j.name)} type={quoteattr(j.kind)}>",
-                  f"    <parent link={quoteattr(j.parent)}/>",
-                  f"    <child link={quoteattr(j.child)}/>",
+        lines += [f"  <joint name={_quoteattr(j.name)} type={_quoteattr(j.kind)}>",
+                  f"    <parent link={_quoteattr(j.parent)}/>",
+                  f"    <child link={_quoteattr(j.child)}/>",
                   f'    <origin xyz="{fmt(j.xyz_m)}" rpy="{fmt(j.rpy_rad)}"/>']
         if j.kind != "fixed":
             lines.append(f'    <axis xyz="{fmt(j.axis)}"/>')

@@ -153,6 +153,11 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def _relative_bearing(x: np.ndarray, y: np.ndarray, c: float, s: float) -> np.ndarray:
+    """Bearings in [-pi, pi] of vectors (x, y) relative to the unit direction (c, s): wrap(atan2(y, x) - atan2(s, c))."""
+    return np.arctan2(c * y - s * x, c * x + s * y)
+
+
 def angular_bins(
     origin_xy: np.ndarray,
     dirs_xy: np.ndarray,
@@ -161,13 +166,14 @@ def angular_bins(
     centers: np.ndarray,
     radii: np.ndarray,
     n_bins: int,
-) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+) -> tuple[np.ndarray, list[tuple[slice, np.ndarray, np.ndarray]]]:
     """Group rays by bearing and list the side faces each group can see.
 
     A face (segment p0 -> p1, or a circle) is kept for a group when the bearing
     interval it subtends from the origin overlaps the group's bearing interval;
     rays in a group can hit no other face. The origin must be outside every
-    circle and off every segment.
+    circle and off every segment. With one group every face is kept (no
+    bearings are computed).
 
     Args:
         origin_xy: (2,) ray origin in m.
@@ -176,35 +182,39 @@ def angular_bins(
         n_bins: number of bearing groups (>= 1).
 
     Returns:
-        One (ray_indices, segment_indices, circle_indices) per non-empty
-        group; rays with no horizontal component are left out (they cannot hit
-        a vertical face).
+        The indices of the rays that have a horizontal component, ordered by
+        group (the others cannot hit a vertical face and are left out), and one
+        (slice of that order, segment indices, circle indices) per non-empty group.
     """
     h2 = dirs_xy[:, 0] ** 2 + dirs_xy[:, 1] ** 2
     moving = h2 > 1e-24
-    if not moving.any():
-        return []
-    rays = np.flatnonzero(moving) if not moving.all() else np.arange(len(dirs_xy))
-    d = dirs_xy[rays]
-    mean = d.sum(axis=0)
-    center = float(np.arctan2(mean[1], mean[0])) if np.hypot(*mean) > 1e-12 else 0.0
-    rel = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - center)
-    lo, hi = float(rel.min()), float(rel.max())
+    every = bool(moving.all())
+    rays = np.arange(len(dirs_xy)) if every else np.flatnonzero(moving)
+    if len(rays) == 0:
+        return rays, []
     n_bins = max(1, int(n_bins))
+    if n_bins == 1:
+        return rays, [(slice(0, len(rays)), np.arange(len(seg_p0)), np.arange(len(centers)))]
+    d = dirs_xy if every else dirs_xy[rays]
+    mean = d.sum(axis=0)
+    norm = float(np.hypot(*mean))
+    # Bearings are taken relative to the rays' mean direction (c, s), so that a fan of rays does not straddle +-pi.
+    c, s = (float(mean[0]) / norm, float(mean[1]) / norm) if norm > 1e-12 else (1.0, 0.0)
+    rel = _relative_bearing(d[:, 0], d[:, 1], c, s)
+    lo, hi = float(rel.min()), float(rel.max())
     width = max(hi - lo, 1e-9) / n_bins
     bin_id = np.minimum(((rel - lo) / width).astype(np.intp), n_bins - 1)
     b0 = lo + width * np.arange(n_bins) - 1e-9
     b1 = b0 + width + 2e-9
-    if n_bins == 1:
-        b1[-1] = hi + 1e-9
 
-    r0 = wrap_angle(np.arctan2(seg_p0[:, 1] - origin_xy[1], seg_p0[:, 0] - origin_xy[0]) - center)
-    r1 = wrap_angle(np.arctan2(seg_p1[:, 1] - origin_xy[1], seg_p1[:, 0] - origin_xy[0]) - center)
+    ox, oy = origin_xy[0], origin_xy[1]
+    r0 = _relative_bearing(seg_p0[:, 0] - ox, seg_p0[:, 1] - oy, c, s)
+    r1 = _relative_bearing(seg_p1[:, 0] - ox, seg_p1[:, 1] - oy, c, s)
     span = wrap_angle(r1 - r0)
     seg_start = r0 + np.minimum(span, 0.0)
     seg_end = seg_start + np.abs(span)
-    rc = np.hypot(centers[:, 0] - origin_xy[0], centers[:, 1] - origin_xy[1])
-    ac = wrap_angle(np.arctan2(centers[:, 1] - origin_xy[1], centers[:, 0] - origin_xy[0]) - center)
+    rc = np.hypot(centers[:, 0] - ox, centers[:, 1] - oy)
+    ac = _relative_bearing(centers[:, 0] - ox, centers[:, 1] - oy, c, s)
     half = np.arcsin(np.clip(radii / np.maximum(rc, 1e-12), 0.0, 1.0))
     starts = np.concatenate([seg_start, ac - half])[:, None]
     ends = np.concatenate([seg_end, ac + half])[:, None]
@@ -212,13 +222,12 @@ def angular_bins(
     for shift in (-2.0 * np.pi, 0.0, 2.0 * np.pi):
         overlap |= (starts <= b1 + shift) & (ends >= b0 + shift)
 
-    order = np.argsort(bin_id.astype(np.int16), kind="stable")  # radix sort
-    counts = np.bincount(bin_id, minlength=n_bins)
-    groups = np.split(rays[order], np.cumsum(counts)[:-1])
+    order = rays[np.argsort(bin_id.astype(np.int16), kind="stable")]  # radix sort
+    bounds = np.concatenate(([0], np.cumsum(np.bincount(bin_id, minlength=n_bins)))).tolist()
     n_seg = len(seg_p0)
-    out = []
-    for b, members in enumerate(groups):
-        if len(members):
+    groups = []
+    for b in range(n_bins):
+        if bounds[b + 1] > bounds[b]:
             faces = overlap[:, b]
-            out.append((members, np.flatnonzero(faces[:n_seg]), np.flatnonzero(faces[n_seg:])))
-    return out
+            groups.append((slice(bounds[b], bounds[b + 1]), np.flatnonzero(faces[:n_seg]), np.flatnonzero(faces[n_seg:])))
+    return order, groups

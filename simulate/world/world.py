@@ -355,8 +355,11 @@ class World:
         if len(p0) + len(radii) == 0:
             return t_out
         n_bins = min(64, max(1, len(dirs) // RAYS_PER_BEARING_GROUP))
-        groups = geo.angular_bins(o[:2], dirs[:, :2], p0, p1, centers, radii, n_bins)
-        for rays, fsel, csel_g in groups:
+        order, groups = geo.angular_bins(o[:2], dirs[:, :2], p0, p1, centers, radii, n_bins)
+        # One gather and one scatter: each group is a contiguous run of the rays sorted by group.
+        ordered = np.take(dirs, order, axis=0)
+        t_ordered = np.full(len(order), np.inf)
+        for run, fsel, csel_g in groups:
             n_faces = len(fsel) + len(csel_g)
             if n_faces == 0:
                 continue
@@ -364,13 +367,14 @@ class World:
             g_ez = (None, None) if ez0 is None else (ez0[fsel], ez1[fsel])
             g_cz = (None, None) if cz0 is None else (cz0[csel_g], cz1[csel_g])
             step = geo.chunk_size(n_faces)
-            for i in range(0, len(rays), step):
-                idx = rays[i : i + step]
-                d = dirs[idx]
+            for i in range(run.start, run.stop, step):
+                chunk = slice(i, min(i + step, run.stop))
+                d = ordered[chunk]
                 t = geo.ray_vertical_faces(o, d, g_p0, g_p1, *g_ez)
                 if len(g_r):
                     t = np.minimum(t, geo.ray_cylinder_sides(o, d, g_c, g_r, *g_cz))
-                t_out[idx] = t
+                t_ordered[chunk] = t
+        t_out[order] = t_ordered
         return t_out
 
     def _ring_edges_of(self, prism_index: int) -> tuple[np.ndarray, np.ndarray]:

@@ -162,7 +162,7 @@ class McapFileWriter:
         self._out.write(compressed)
         chunk_end = self._out.tell()
         index_offsets: list[tuple[int, int]] = []
-        for cid in np.unique(channel).tolist():
+        for cid in np.flatnonzero(np.bincount(channel)).tolist():  # the channels present (np.unique imports numpy.ma)
             mine = channel == cid
             entries = np.zeros(int(mine.sum()), dtype=_INDEX_ENTRY)
             entries["log_time"] = log_time[mine]
