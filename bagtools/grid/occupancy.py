@@ -329,7 +329,7 @@ class OccupancyGrid:
             ValueError: negative finite ranges, mismatched shapes, non-finite pose/angles/max_range.
         """
         pose = np.asarray(pose, dtype=np.float64).reshape(-1)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        if pose.shape != (3,) or not all(map(math.isfinite, pose.tolist())):
             raise ValueError(f"pose must be a finite [x y theta], got {pose!r}")
         ranges = np.asarray(ranges, dtype=np.float64).reshape(-1)
         angles = np.asarray(angles, dtype=np.float64).reshape(-1)
@@ -361,11 +361,12 @@ class OccupancyGrid:
         ends_uv -= self._anchor[:, None]
         ends_uv *= self._res
         start_uv = self._world_to_uv(pose[:2])
-        # A scan of millions of beams is traversed in parts of RAY_CELLS_PER_PART cells, not all at once.
-        crossed = np.cumsum(r * self.resolution + 2.0)
-        if crossed[-1] <= RAY_CELLS_PER_PART:
+        # A scan of millions of beams is traversed in parts of RAY_CELLS_PER_PART cells, not all at once
+        # (a scan that cannot reach that many, even at max_range everywhere, is one part).
+        if r.size * (max_range * self._res + 2.0) < 0.999 * RAY_CELLS_PER_PART:
             self._insert(start_uv, ends_uv, hit, l_free, l_occ)
             return
+        crossed = np.cumsum(r * self.resolution + 2.0)
         cuts = np.searchsorted(crossed, np.arange(RAY_CELLS_PER_PART, crossed[-1], RAY_CELLS_PER_PART))
         for part in np.split(np.arange(r.size), np.unique(cuts)):
             if part.size:
@@ -400,7 +401,7 @@ class OccupancyGrid:
         width, height = c_hi - c_lo + 1, r_hi - r_lo + 1
         # one update per cell: occupied where a beam ends, else free where one passes, else none
         delta = np.zeros(height * width, dtype=np.float32)
-        delta[window_cells(seg, c_lo, r_lo, width, self._work)] = l_free
+        delta[window_cells(seg, c_lo, r_lo, width, height, self._work)] = l_free
         ends = np.dot((1.0, float(width)), seg.last[:, hit]) - (c_lo + r_lo * width)  # exact: whole numbers
         delta[ends.astype(np.intp)] = l_occ
         rows = self._log_odds.shape[0]

@@ -20,6 +20,11 @@ height that is linear in k, and likewise for the horizontal lines. The cell
 entered at each crossing, together with the start cell, is the whole sequence.
 Work is proportional to the number of cells visited, with no Python loop per
 segment or per cell.
+
+:func:`traverse` lists the crossings segment by segment. :func:`window_cells`, behind
+``OccupancyGrid.insert_ray``, needs only the set of cells in a window: it evaluates the
+same formulas (the same floating-point operations, so the same cells) over a padded
+(axis, crossing number, segment) block, which needs no per-crossing gather.
 """
 
 from __future__ import annotations
@@ -82,10 +87,9 @@ def segment_batch(start_uv: np.ndarray, ends_uv: np.ndarray) -> SegmentBatch:
     first = np.floor(p0 + nudge)
     n_cross = np.maximum((np.floor(ends_uv - nudge) - first) * step, 0.0)
     last = first + step * n_cross
+    # an axis without travel keeps its start coordinate along the whole segment
     moving = (step[0] != 0.0) & (step[1] != 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # an axis without travel keeps its start coordinate along the whole segment
-        slope = np.where(moving, d[::-1] / d, 0.0)
+    slope = np.divide(d[::-1], d, out=np.zeros_like(d), where=moving)
     # crossing k of the lines across axis a is line first + (step < 0) + k*step
     b_first = p0[::-1] + nudge[::-1] + (first + (step < 0) - p0) * slope
     return SegmentBatch(first, step, n_cross, last, b_first, step * slope)
@@ -107,6 +111,20 @@ def _b_cells(k: np.ndarray, b_first: np.ndarray, b_step: np.ndarray) -> np.ndarr
     return np.floor(b, out=b)
 
 
+def _listed_cells(seg: SegmentBatch, with_segment: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(cols, rows, segment): the N start cells, then every crossing segment by segment (float64 cells)."""
+    n = seg.first.shape[1]
+    cells: list[list[np.ndarray]] = [[seg.first[0]], [seg.first[1]]]  # [cols, rows]
+    ids = [np.arange(n)]
+    for a in (0, 1):  # crossings of vertical lines enter columns, of horizontal lines rows
+        k, owner = _compact_k(seg.n_cross[a])
+        cells[a].append(seg.step[a, owner] * k + seg.first[a, owner])
+        cells[1 - a].append(_b_cells(k, seg.b_first[a, owner], seg.b_step[a, owner]))
+        ids.append(owner)
+    segment = np.concatenate(ids) if with_segment else None
+    return np.concatenate(cells[0]), np.concatenate(cells[1]), segment
+
+
 def traverse(start_uv: np.ndarray, ends_uv: np.ndarray, with_segment: bool = False) -> Traversal:
     """Every cell each segment from ``start_uv`` to ``ends_uv[s]`` passes through.
 
@@ -119,21 +137,17 @@ def traverse(start_uv: np.ndarray, ends_uv: np.ndarray, with_segment: bool = Fal
         A :class:`Traversal` with integer (int64) cell indices.
     """
     ends_uv = np.asarray(ends_uv, dtype=np.float64).reshape(-1, 2)
-    n = ends_uv.shape[0]
     start_uv = np.asarray(start_uv, dtype=np.float64)
     start_uv = start_uv.reshape(2) if start_uv.size == 2 and start_uv.ndim < 2 else start_uv.reshape(-1, 2).T
     seg = segment_batch(start_uv, ends_uv.T)
-    cells: list[list[np.ndarray]] = [[seg.first[0]], [seg.first[1]]]  # [cols, rows]
-    ids = [np.arange(n)]
-    for a in (0, 1):  # crossings of vertical lines enter columns, of horizontal lines rows
-        k, owner = _compact_k(seg.n_cross[a])
-        cells[a].append(seg.step[a, owner] * k + seg.first[a, owner])
-        cells[1 - a].append(_b_cells(k, seg.b_first[a, owner], seg.b_step[a, owner]))
-        ids.append(owner)
-    cols = np.concatenate(cells[0]).astype(np.int64)
-    rows = np.concatenate(cells[1]).astype(np.int64)
-    segment = np.concatenate(ids) if with_segment else None
-    return Traversal(cols, rows, segment, seg.last[0].astype(np.int64), seg.last[1].astype(np.int64))
+    cols, rows, segment = _listed_cells(seg, with_segment)
+    return Traversal(cols.astype(np.int64), rows.astype(np.int64), segment,
+                     seg.last[0].astype(np.int64), seg.last[1].astype(np.int64))
+
+
+_ROUNDING = 1.5 * 2.0**52
+"""A whole number x with |x| < 2**51 is stored exactly in _ROUNDING + x, whose bits are _ROUNDING_BITS + x."""
+_ROUNDING_BITS = int(np.float64(_ROUNDING).view(np.int64))
 
 
 class Workspace:
@@ -155,55 +169,64 @@ class Workspace:
             self._arrays[name] = buf
         return buf
 
+    def crossing_numbers(self, k_max: int, n: int) -> np.ndarray:
+        """(k_max, n) float64 view with entry [k - 1, s] = k, from a table kept (and grown) between calls."""
+        table = self._arrays.get("crossing_numbers")
+        if table is None or table.shape[0] < k_max or table.shape[1] < n:
+            shape = (k_max, n) if table is None else (max(k_max, table.shape[0]), max(n, table.shape[1]))
+            table = np.empty(shape)
+            table[...] = np.arange(1.0, shape[0] + 1.0)[:, None]
+            if table.size <= self.keep_entries:
+                self._arrays["crossing_numbers"] = table
+        return table[:k_max, :n]
 
-def window_cells(seg: SegmentBatch, col0: int, row0: int, width: int, work: Workspace | None = None) -> np.ndarray:
+
+def window_cells(
+    seg: SegmentBatch, col0: int, row0: int, width: int, height: int, work: Workspace | None = None,
+) -> np.ndarray:
     """Flat indices ``(row - row0)*width + (col - col0)`` of every cell the segments visit (repeats included).
 
-    Crossings are laid out as a (2, K, N) block, K the most lines any segment crosses on
-    one axis, with each segment's crossing numbers past its own count held at its last
-    crossing (a segment crossing nothing on an axis repeats its start cell), so that no
-    per-crossing gather is needed. When that block would hold more than
-    :data:`PADDED_PER_CROSSING` entries per crossing (very unequal segment lengths), the crossings are listed segment by
-    segment instead. The result may be a view into ``work``'s arrays.
+    The visited cells must lie in the window of ``height`` x ``width`` cells at (col0, row0).
+    Crossings are laid out as a (2, K, N) block, K the most lines any segment crosses on one
+    axis, with each segment's crossing numbers past its own count held at its last crossing (a
+    segment crossing nothing on an axis repeats its start cell), so that no per-crossing gather
+    is needed. When that block would hold more than :data:`PADDED_PER_CROSSING` entries per
+    crossing (very unequal segment lengths), or cell numbers could leave float64's exact
+    whole numbers, the crossings are listed segment by segment instead. Returns int64
+    indices, possibly a view into ``work``'s arrays (valid until its next use).
     """
-    work = work if work is not None else Workspace(0)
     n = seg.first.shape[1]
+    k_max = int(seg.n_cross.max()) if n else 0
+    padded = 2 * n * k_max
+    exact = (abs(col0) + abs(row0) + width + height) * (width + 1) < 2**50
+    if not (exact and padded <= PADDED_PER_CROSSING * float(seg.n_cross.sum()) + 65536):
+        cols, rows, _ = _listed_cells(seg, False)
+        flat = rows.astype(np.int64) - row0
+        flat *= width
+        flat += cols.astype(np.int64)
+        flat -= col0
+        return flat
+    work = work if work is not None else Workspace(0)
     weight = np.array([[1.0], [float(width)]])  # (col, row) -> flat index
     origin = np.array([[float(col0)], [float(row0)]])
     from_origin = (seg.first - origin) * weight
-    # axis a: flat = floor(b_first + b_step*k)*weight_b + a_offset + a_step*k
-    a_offset = from_origin - origin[::-1] * weight[::-1]
-    a_step = seg.step * weight
-    k_max = int(seg.n_cross.max()) if n else 0
-    total = float(seg.n_cross.sum())
-    padded = 2 * n * k_max
-    if padded <= PADDED_PER_CROSSING * total + 65536:
-        out = work.array("index", n + padded, np.intp)
-        b_first = np.where(seg.n_cross > 0, seg.b_first, seg.first[::-1])  # k = 0 below: the start cell
-        k = work.array("k", padded, np.float64).reshape(2, k_max, n)
-        b = work.array("b", padded, np.float64).reshape(2, k_max, n)
-        np.minimum(np.arange(1.0, k_max + 1.0)[:, None], seg.n_cross[:, None, :], out=k)
-        np.multiply(seg.b_step[:, None, :], k, out=b)
-        b += b_first[:, None, :]
-        np.floor(b, out=b)
-        b[0] *= weight[1, 0]
-        k *= a_step[:, None, :]
-        k += a_offset[:, None, :]
-        b += k
-        out[n:] = b.reshape(-1)
-    else:
-        lists = []
-        for a in (0, 1):
-            k, owner = _compact_k(seg.n_cross[a])
-            b = _b_cells(k, seg.b_first[a, owner], seg.b_step[a, owner])
-            b *= weight[1 - a, 0]
-            k *= a_step[a, owner]
-            k += a_offset[a, owner]
-            b += k
-            lists.append(b)
-        out = np.empty(n + lists[0].size + lists[1].size, np.intp)
-        out[n:] = np.concatenate(lists)
-    out[:n] = from_origin.sum(axis=0)  # the start cells
+    # axis a: flat = floor(b_first + b_step*k)*weight_b + a_offset + a_step*k, all whole numbers;
+    # each is summed onto _ROUNDING, exactly, so that one integer subtraction of the bits makes it an index
+    a_offset = from_origin - origin[::-1] * weight[::-1] + _ROUNDING
+    flat = work.array("flat", n + padded, np.float64)
+    k = work.array("k", padded, np.float64).reshape(2, k_max, n)
+    b = flat[n:].reshape(2, k_max, n)
+    np.minimum(work.crossing_numbers(k_max, n), seg.n_cross[:, None, :], out=k)
+    np.multiply(seg.b_step[:, None, :], k, out=b)
+    b += np.where(seg.n_cross > 0, seg.b_first, seg.first[::-1])[:, None, :]  # at k = 0: the start cell
+    np.floor(b, out=b)
+    b[0] *= weight[1, 0]
+    k *= (seg.step * weight)[:, None, :]
+    k += a_offset[:, None, :]
+    b += k
+    np.add(from_origin.sum(axis=0), _ROUNDING, out=flat[:n])  # the start cells
+    out = flat.view(np.int64)
+    out -= _ROUNDING_BITS
     return out
 
 

@@ -34,10 +34,20 @@ def test_window_cells_are_traverse_cells(monkeypatch, layout):
     for start, ends in random_batches(11):
         trav = traverse(start, ends)
         col0, row0 = int(trav.cols.min()) - 3, int(trav.rows.min()) - 2
-        width = int(trav.cols.max()) - col0 + 5
-        flat = window_cells(segment_batch(start, ends.T), col0, row0, width, work)
-        assert flat.dtype == np.intp
+        width, height = int(trav.cols.max()) - col0 + 5, int(trav.rows.max()) - row0 + 1
+        flat = window_cells(segment_batch(start, ends.T), col0, row0, width, height, work)
+        assert flat.dtype == np.int64 and 0 <= flat.min() and flat.max() < width * height
         assert set(flat.tolist()) == cell_set(trav.cols, trav.rows, col0, row0, width)
+
+
+def test_far_from_the_origin_the_cells_are_listed_exactly():
+    start = np.array([2.0**47 + 0.25, -(2.0**46) + 0.5])
+    ends = start + np.random.default_rng(2).uniform(-20, 20, (30, 2))
+    trav = traverse(start, ends)
+    col0, row0 = int(trav.cols.min()), int(trav.rows.min())
+    width, height = int(trav.cols.max()) - col0 + 1, int(trav.rows.max()) - row0 + 1
+    flat = window_cells(segment_batch(start, ends.T), col0, row0, width, height)
+    assert set(flat.tolist()) == cell_set(trav.cols, trav.rows, col0, row0, width)
 
 
 def test_both_layouts_give_the_same_map(monkeypatch):
