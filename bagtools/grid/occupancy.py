@@ -402,7 +402,7 @@ class OccupancyGrid:
         # one update per cell: occupied where a beam ends, else free where one passes, else none
         delta = np.zeros(height * width, dtype=np.float32)
         delta[window_cells(seg, c_lo, r_lo, width, height, self._work)] = l_free
-        ends = np.dot((1.0, float(width)), seg.last[:, hit]) - (c_lo + r_lo * width)  # exact: whole numbers
+        ends = np.dot((1.0, float(width)), seg.last[:, hit] - [[c_lo], [r_lo]])  # exact: small whole numbers
         delta[ends.astype(np.intp)] = l_occ
         rows = self._log_odds.shape[0]
         top = rows - 1 - (r_hi - self._off_row)
