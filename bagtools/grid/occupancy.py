@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from bagtools.grid.raytrace import EPS_CELLS, traverse
+from bagtools.grid.raytrace import EPS_CELLS, Workspace, segment_batch, window_cells
 
 #: Cells traversed at once by :meth:`OccupancyGrid.insert_ray` (a few hundred MB of traversal): a scan whose rays
 #: cross more (a 20-million-beam scan) is inserted in parts, each part's cells updated once.
@@ -107,6 +107,7 @@ class OccupancyGrid:
         self.free_threshold = float(free_threshold)
         self.probability_saturation = (lo_p, hi_p)
         self._l_min, self._l_max = _logit(lo_p), _logit(hi_p)
+        self._work = Workspace()  # insert_ray's work arrays, reused scan to scan
 
     @classmethod
     def from_probabilities(
@@ -328,7 +329,7 @@ class OccupancyGrid:
             ValueError: negative finite ranges, mismatched shapes, non-finite pose/angles/max_range.
         """
         pose = np.asarray(pose, dtype=np.float64).reshape(-1)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        if pose.shape != (3,) or not all(map(math.isfinite, pose.tolist())):
             raise ValueError(f"pose must be a finite [x y theta], got {pose!r}")
         ranges = np.asarray(ranges, dtype=np.float64).reshape(-1)
         angles = np.asarray(angles, dtype=np.float64).reshape(-1)
@@ -336,28 +337,40 @@ class OccupancyGrid:
             raise ValueError(f"ranges and angles differ in length: {ranges.size} vs {angles.size}")
         if not (np.isfinite(max_range) and max_range > 0):
             raise ValueError(f"max_range must be a positive number of metres, got {max_range}")
-        if np.any((ranges < 0) & np.isfinite(ranges)):
+        # one reduction each in the common case: no NaN, -inf or negative range; finite angles
+        lowest = ranges.min() if ranges.size else 0.0
+        if not lowest >= 0.0 and np.any((ranges < 0) & np.isfinite(ranges)):
             raise ValueError(f"ranges must not be negative (min {np.nanmin(ranges[np.isfinite(ranges)])} m)")
-        if not np.all(np.isfinite(angles)):
+        if not np.isfinite(angles.sum()) and not np.all(np.isfinite(angles)):
             raise ValueError("angles must be finite")
         l_free, l_occ = self._inverse_model_log_odds(inverse_model)
-        valid = ~np.isnan(ranges) & (ranges != -np.inf)
-        if not valid.all():
+        if not lowest > -np.inf:  # NaN or -inf present
+            valid = ~np.isnan(ranges) & (ranges != -np.inf)
             ranges, angles = ranges[valid], angles[valid]
         if ranges.size == 0:
             return
         hit = ranges < max_range
         r = np.minimum(ranges, max_range)
+        # beam ends in grid units, (2, N): ((pose + r*[cos sin]) - anchor) * resolution
         world_angles = angles + pose[2]
-        ends = np.empty((r.size, 2))
-        ends[:, 0] = pose[0] + r * np.cos(world_angles)
-        ends[:, 1] = pose[1] + r * np.sin(world_angles)
-        # A scan of millions of beams is traversed in parts of RAY_CELLS_PER_PART cells, not all at once.
+        ends_uv = np.empty((2, r.size))
+        np.cos(world_angles, out=ends_uv[0])
+        np.sin(world_angles, out=ends_uv[1])
+        ends_uv *= r
+        ends_uv += pose[:2, None]
+        ends_uv -= self._anchor[:, None]
+        ends_uv *= self._res
+        start_uv = self._world_to_uv(pose[:2])
+        # A scan of millions of beams is traversed in parts of RAY_CELLS_PER_PART cells, not all at once
+        # (a scan that cannot reach that many, even at max_range everywhere, is one part).
+        if r.size * (max_range * self._res + 2.0) < 0.999 * RAY_CELLS_PER_PART:
+            self._insert(start_uv, ends_uv, hit, l_free, l_occ)
+            return
         crossed = np.cumsum(r * self.resolution + 2.0)
         cuts = np.searchsorted(crossed, np.arange(RAY_CELLS_PER_PART, crossed[-1], RAY_CELLS_PER_PART))
         for part in np.split(np.arange(r.size), np.unique(cuts)):
             if part.size:
-                self._insert(pose[:2], ends[part], hit[part], l_free, l_occ)
+                self._insert(start_uv, ends_uv[:, part], hit[part], l_free, l_occ)
 
     def insert_segments(
         self, start_xy: np.ndarray, end_xy: np.ndarray, inverse_model: tuple[float, float] = DEFAULT_INVERSE_MODEL,
@@ -375,29 +388,22 @@ class OccupancyGrid:
             raise ValueError("start and end points must be finite [x y]")
         l_free, l_occ = self._inverse_model_log_odds(inverse_model)
         if ends.shape[0]:
-            self._insert(start, ends, np.ones(ends.shape[0], dtype=bool), l_free, l_occ)
+            self._insert(self._world_to_uv(start), self._world_to_uv(ends).T, np.ones(ends.shape[0], dtype=bool),
+                         l_free, l_occ)
 
-    def _insert(self, start_xy: np.ndarray, ends_xy: np.ndarray, hit: np.ndarray, l_free: float, l_occ: float) -> None:
-        n = ends_xy.shape[0]
-        start_uv = self._world_to_uv(start_xy)
-        trav = traverse(start_uv, self._world_to_uv(ends_xy))
-        start_cols, start_rows = trav.cols[:n], trav.rows[:n]
+    def _insert(self, start_uv: np.ndarray, ends_uv: np.ndarray, hit: np.ndarray, l_free: float, l_occ: float) -> None:
+        """Update the cells of segments start_uv (2,) -> ends_uv (2, N), grid units; hit: (N,) bool, ends occupied."""
+        seg = segment_batch(start_uv, ends_uv)
         # every visited cell lies in the box spanned by the start and end cells
-        c_lo = int(min(start_cols.min(), trav.end_cols.min()))
-        c_hi = int(max(start_cols.max(), trav.end_cols.max()))
-        r_lo = int(min(start_rows.min(), trav.end_rows.min()))
-        r_hi = int(max(start_rows.max(), trav.end_rows.max()))
+        box = np.concatenate((seg.first, seg.last), axis=1)
+        (c_lo, r_lo), (c_hi, r_hi) = box.min(axis=1).astype(int).tolist(), box.max(axis=1).astype(int).tolist()
         self._grow_to_cells(c_lo, r_lo, c_hi, r_hi)
         width, height = c_hi - c_lo + 1, r_hi - r_lo + 1
-        n_cells = width * height
-        base = r_lo * width + c_lo
-        visited = trav.rows * width
-        visited += trav.cols
-        visited -= base
-        free = np.bincount(visited, minlength=n_cells).astype(bool)
-        ends = trav.end_rows[hit] * width + trav.end_cols[hit] - base
-        occupied = np.bincount(ends, minlength=n_cells).astype(bool)
-        delta = np.where(occupied, np.float32(l_occ), np.where(free, np.float32(l_free), np.float32(0.0)))
+        # one update per cell: occupied where a beam ends, else free where one passes, else none
+        delta = np.zeros(height * width, dtype=np.float32)
+        delta[window_cells(seg, c_lo, r_lo, width, height, self._work)] = l_free
+        ends = np.dot((1.0, float(width)), seg.last[:, hit] - [[c_lo], [r_lo]])  # exact: small whole numbers
+        delta[ends.astype(np.intp)] = l_occ
         rows = self._log_odds.shape[0]
         top = rows - 1 - (r_hi - self._off_row)
         left = c_lo - self._off_col
@@ -423,12 +429,18 @@ class OccupancyGrid:
         other._off_row = self._off_row + (rows - bottom)
         return other
 
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_work"] = Workspace()  # scratch, not state
+        return state
+
     def copy(self) -> OccupancyGrid:
         """An independent copy."""
         other = object.__new__(OccupancyGrid)
         other.__dict__.update(self.__dict__)
         other._log_odds = self._log_odds.copy()
         other._anchor = self._anchor.copy()
+        other._work = Workspace()
         return other
 
     def __repr__(self) -> str:

@@ -20,6 +20,11 @@ height that is linear in k, and likewise for the horizontal lines. The cell
 entered at each crossing, together with the start cell, is the whole sequence.
 Work is proportional to the number of cells visited, with no Python loop per
 segment or per cell.
+
+:func:`traverse` lists the crossings segment by segment. :func:`window_cells`, behind
+``OccupancyGrid.insert_ray``, needs only the set of cells in a window: it evaluates the
+same formulas (the same floating-point operations, so the same cells) over a padded
+(axis, crossing number, segment) block, which needs no per-crossing gather.
 """
 
 from __future__ import annotations
@@ -30,6 +35,10 @@ import numpy as np
 
 EPS_CELLS = 1e-9
 """Pieces of a segment shorter than this (in cells) are ignored near grid lines."""
+
+PADDED_PER_CROSSING = 4.0
+""":func:`window_cells` lays crossings out as a padded block while it holds at most this many
+entries per crossing (plus 65536): its work arrays stay within a few times the crossings."""
 
 
 class Traversal(NamedTuple):
@@ -51,39 +60,69 @@ class Traversal(NamedTuple):
     end_rows: np.ndarray
 
 
-def _axis_crossings(
-    a0: np.ndarray, a_first_cell: np.ndarray, n_cross: np.ndarray, step: np.ndarray,
-    b0: np.ndarray, slope: np.ndarray, b_bias: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Cells entered at each crossing of the grid lines across axis ``a``.
+class SegmentBatch(NamedTuple):
+    """Per-segment traversal set-up, one row per axis: row 0 is u (columns), row 1 is v (rows).
 
-    For segment s, crossing k = 1..n_cross[s] enters a-cell ``a_first_cell + k*step``
-    through the line a = a_first_cell + (step < 0) + k*step; the b-coordinate there is
-    ``b0 + (line - a0)*slope`` and the b-cell is its floor after nudging by ``b_bias``
-    (a tiny step in the direction of travel, so that a crossing exactly on a lattice
-    corner lands in the cell the segment continues into). Returns (a_cells, b_cells)
-    as float arrays of length n_cross.sum(), segment by segment.
+    All arrays are (2, N) float64 in grid units. For axis a and crossing k = 1..n_cross[a, s],
+    segment s enters a-cell ``first[a, s] + k*step[a, s]`` and the other axis' cell
+    ``floor(b_first[a, s] + b_step[a, s]*k)``.
     """
-    total = int(n_cross.sum())
-    offsets = np.cumsum(n_cross) - n_cross
-    back = (step < 0).astype(np.float64)
-    # per segment: k = e + (1 - offset) for global entry index e; exact in float64
-    coeffs = np.stack([
-        1.0 - offsets,
-        a_first_cell,
-        step,
-        b0 + b_bias + (a_first_cell + back - a0) * slope,
-        step * slope,
-    ])
-    per_entry = np.repeat(coeffs, n_cross, axis=1)
-    k = np.arange(total, dtype=np.float64)
-    k += per_entry[0]
-    a_cells = per_entry[2] * k
-    a_cells += per_entry[1]
-    b_cells = per_entry[4] * k
-    b_cells += per_entry[3]
-    np.floor(b_cells, out=b_cells)
-    return a_cells, b_cells
+
+    first: np.ndarray  # start cell (nudged into the segment)
+    step: np.ndarray  # direction of travel: -1, 0 (extent below EPS_CELLS) or +1
+    n_cross: np.ndarray  # grid lines crossed (whole numbers)
+    last: np.ndarray  # end cell (the cell of the last piece)
+    b_first: np.ndarray  # other coordinate at line k = 0, nudged by EPS_CELLS in its direction of travel
+    b_step: np.ndarray  # other coordinate's change per line crossed
+
+
+def segment_batch(start_uv: np.ndarray, ends_uv: np.ndarray) -> SegmentBatch:
+    """Set up the traversal of segments from ``start_uv`` ((2,) or (2, N)) to ``ends_uv`` ((2, N)), grid units."""
+    p0 = start_uv if start_uv.ndim == 2 else start_uv[:, None]
+    d = ends_uv - p0
+    # direction of travel per axis; an extent below EPS counts as none (no crossings)
+    step = np.where(np.abs(d) > EPS_CELLS, np.sign(d), 0.0)
+    # first and last piece: nudge into the segment so boundary points go to the visited cell
+    nudge = step * EPS_CELLS
+    first = np.floor(p0 + nudge)
+    n_cross = np.maximum((np.floor(ends_uv - nudge) - first) * step, 0.0)
+    last = first + step * n_cross
+    # an axis without travel keeps its start coordinate along the whole segment
+    moving = (step[0] != 0.0) & (step[1] != 0.0)
+    slope = np.divide(d[::-1], d, out=np.zeros_like(d), where=moving)
+    # crossing k of the lines across axis a is line first + (step < 0) + k*step
+    b_first = p0[::-1] + nudge[::-1] + (first + (step < 0) - p0) * slope
+    return SegmentBatch(first, step, n_cross, last, b_first, step * slope)
+
+
+def _compact_k(n_cross: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, owner): crossing number 1..n and segment index of every crossing, segment by segment."""
+    counts = n_cross.astype(np.int64)
+    owner = np.repeat(np.arange(counts.size), counts)
+    k = np.arange(owner.size, dtype=np.float64)
+    k += np.repeat(1.0 - (np.cumsum(counts) - counts), counts)  # exact in float64
+    return k, owner
+
+
+def _b_cells(k: np.ndarray, b_first: np.ndarray, b_step: np.ndarray) -> np.ndarray:
+    """floor(b_first + b_step*k), float64, computed in place of a new array."""
+    b = b_step * k
+    b += b_first
+    return np.floor(b, out=b)
+
+
+def _listed_cells(seg: SegmentBatch, with_segment: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(cols, rows, segment): the N start cells, then every crossing segment by segment (float64 cells)."""
+    n = seg.first.shape[1]
+    cells: list[list[np.ndarray]] = [[seg.first[0]], [seg.first[1]]]  # [cols, rows]
+    ids = [np.arange(n)]
+    for a in (0, 1):  # crossings of vertical lines enter columns, of horizontal lines rows
+        k, owner = _compact_k(seg.n_cross[a])
+        cells[a].append(seg.step[a, owner] * k + seg.first[a, owner])
+        cells[1 - a].append(_b_cells(k, seg.b_first[a, owner], seg.b_step[a, owner]))
+        ids.append(owner)
+    segment = np.concatenate(ids) if with_segment else None
+    return np.concatenate(cells[0]), np.concatenate(cells[1]), segment
 
 
 def traverse(start_uv: np.ndarray, ends_uv: np.ndarray, with_segment: bool = False) -> Traversal:
@@ -98,38 +137,97 @@ def traverse(start_uv: np.ndarray, ends_uv: np.ndarray, with_segment: bool = Fal
         A :class:`Traversal` with integer (int64) cell indices.
     """
     ends_uv = np.asarray(ends_uv, dtype=np.float64).reshape(-1, 2)
-    n = ends_uv.shape[0]
-    start_uv = np.broadcast_to(np.asarray(start_uv, dtype=np.float64), (n, 2))
-    u0, v0 = start_uv[:, 0], start_uv[:, 1]
-    ue, ve = ends_uv[:, 0], ends_uv[:, 1]
-    du, dv = ue - u0, ve - v0
-    # direction of travel per axis; an extent below EPS counts as none (no crossings)
-    su = np.where(np.abs(du) > EPS_CELLS, np.sign(du), 0.0)
-    sv = np.where(np.abs(dv) > EPS_CELLS, np.sign(dv), 0.0)
-    # first and last piece: nudge into the segment so boundary points go to the visited cell
-    c0 = np.floor(u0 + su * EPS_CELLS)
-    r0 = np.floor(v0 + sv * EPS_CELLS)
-    nu_f = np.maximum((np.floor(ue - su * EPS_CELLS) - c0) * su, 0.0)
-    nv_f = np.maximum((np.floor(ve - sv * EPS_CELLS) - r0) * sv, 0.0)
-    ce = c0 + su * nu_f
-    re = r0 + sv * nv_f
-    nu = nu_f.astype(np.int64)
-    nv = nv_f.astype(np.int64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # an axis without travel keeps its start coordinate along the whole segment
-        slope_vu = np.where((su != 0.0) & (sv != 0.0), dv / du, 0.0)
-        slope_uv = np.where((su != 0.0) & (sv != 0.0), du / dv, 0.0)
-    # crossings of vertical lines: enter columns, rows from v
-    cu_cols, cu_rows = _axis_crossings(u0, c0, nu, su, v0, slope_vu, sv * EPS_CELLS)
-    # crossings of horizontal lines: enter rows, columns from u
-    cv_rows, cv_cols = _axis_crossings(v0, r0, nv, sv, u0, slope_uv, su * EPS_CELLS)
-    cols = np.concatenate([c0, cu_cols, cv_cols]).astype(np.int64)
-    rows = np.concatenate([r0, cu_rows, cv_rows]).astype(np.int64)
-    segment = None
-    if with_segment:
-        ids = np.arange(n)
-        segment = np.concatenate([ids, np.repeat(ids, nu), np.repeat(ids, nv)])
-    return Traversal(cols, rows, segment, ce.astype(np.int64), re.astype(np.int64))
+    start_uv = np.asarray(start_uv, dtype=np.float64)
+    start_uv = start_uv.reshape(2) if start_uv.size == 2 and start_uv.ndim < 2 else start_uv.reshape(-1, 2).T
+    seg = segment_batch(start_uv, ends_uv.T)
+    cols, rows, segment = _listed_cells(seg, with_segment)
+    return Traversal(cols.astype(np.int64), rows.astype(np.int64), segment,
+                     seg.last[0].astype(np.int64), seg.last[1].astype(np.int64))
+
+
+_ROUNDING = 1.5 * 2.0**52
+"""A whole number x with |x| < 2**51 is stored exactly in _ROUNDING + x, whose bits are _ROUNDING_BITS + x."""
+_ROUNDING_BITS = int(np.float64(_ROUNDING).view(np.int64))
+
+
+class Workspace:
+    """Work arrays kept from one call to the next, so that a stream of similar scans does not
+    allocate (and page-fault in) fresh arrays each time; arrays of more than ``keep_entries``
+    entries are made afresh and not kept."""
+
+    def __init__(self, keep_entries: int = 1 << 18) -> None:
+        self.keep_entries = keep_entries
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def array(self, name: str, size: int, dtype: type) -> np.ndarray:
+        """A 1-D array of ``size`` entries (contents undefined), valid until the next request of ``name``."""
+        buf = self._arrays.get(name)
+        if buf is not None and buf.size >= size and buf.dtype == dtype:
+            return buf[:size]
+        buf = np.empty(size, dtype)
+        if size <= self.keep_entries:
+            self._arrays[name] = buf
+        return buf
+
+    def crossing_numbers(self, k_max: int, n: int) -> np.ndarray:
+        """(k_max, n) float64 view with entry [k - 1, s] = k, from a table kept (and grown) between calls."""
+        table = self._arrays.get("crossing_numbers")
+        if table is None or table.shape[0] < k_max or table.shape[1] < n:
+            shape = (k_max, n) if table is None else (max(k_max, table.shape[0]), max(n, table.shape[1]))
+            table = np.empty(shape)
+            table[...] = np.arange(1.0, shape[0] + 1.0)[:, None]
+            if table.size <= self.keep_entries:
+                self._arrays["crossing_numbers"] = table
+        return table[:k_max, :n]
+
+
+def window_cells(
+    seg: SegmentBatch, col0: int, row0: int, width: int, height: int, work: Workspace | None = None,
+) -> np.ndarray:
+    """Flat indices ``(row - row0)*width + (col - col0)`` of every cell the segments visit (repeats included).
+
+    The visited cells must lie in the window of ``height`` x ``width`` cells at (col0, row0).
+    Crossings are laid out as a (2, K, N) block, K the most lines any segment crosses on one
+    axis, with each segment's crossing numbers past its own count held at its last crossing (a
+    segment crossing nothing on an axis repeats its start cell), so that no per-crossing gather
+    is needed. When that block would hold more than :data:`PADDED_PER_CROSSING` entries per
+    crossing (very unequal segment lengths), or cell numbers could leave float64's exact
+    whole numbers, the crossings are listed segment by segment instead. Returns int64
+    indices, possibly a view into ``work``'s arrays (valid until its next use).
+    """
+    n = seg.first.shape[1]
+    k_max = int(seg.n_cross.max()) if n else 0
+    padded = 2 * n * k_max
+    exact = (abs(col0) + abs(row0) + width + height) * (width + 1) < 2**50
+    if not (exact and padded <= PADDED_PER_CROSSING * float(seg.n_cross.sum()) + 65536):
+        cols, rows, _ = _listed_cells(seg, False)
+        flat = rows.astype(np.int64) - row0
+        flat *= width
+        flat += cols.astype(np.int64)
+        flat -= col0
+        return flat
+    work = work if work is not None else Workspace(0)
+    weight = np.array([[1.0], [float(width)]])  # (col, row) -> flat index
+    origin = np.array([[float(col0)], [float(row0)]])
+    from_origin = (seg.first - origin) * weight
+    # axis a: flat = floor(b_first + b_step*k)*weight_b + a_offset + a_step*k, all whole numbers;
+    # each is summed onto _ROUNDING, exactly, so that one integer subtraction of the bits makes it an index
+    a_offset = from_origin - origin[::-1] * weight[::-1] + _ROUNDING
+    flat = work.array("flat", n + padded, np.float64)
+    k = work.array("k", padded, np.float64).reshape(2, k_max, n)
+    b = flat[n:].reshape(2, k_max, n)
+    np.minimum(work.crossing_numbers(k_max, n), seg.n_cross[:, None, :], out=k)
+    np.multiply(seg.b_step[:, None, :], k, out=b)
+    b += np.where(seg.n_cross > 0, seg.b_first, seg.first[::-1])[:, None, :]  # at k = 0: the start cell
+    np.floor(b, out=b)
+    b[0] *= weight[1, 0]
+    k *= (seg.step * weight)[:, None, :]
+    k += a_offset[:, None, :]
+    b += k
+    np.add(from_origin.sum(axis=0), _ROUNDING, out=flat[:n])  # the start cells
+    out = flat.view(np.int64)
+    out -= _ROUNDING_BITS
+    return out
 
 
 def unique_per_segment(trav: Traversal) -> Traversal:
