@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "ndt-odom": "bagtools.cli.ndt_odom:ndt_odom",
     "grid": "bagtools.cli.grid:grid",
     "slam": "bagtools.cli.slam:slam",
+    "localize": "bagtools.cli.localize:localize",
     "export": "bagtools.cli.export:export",
     "eval": "bagtools.cli.evaluate:evaluate",
     "batch": "bagtools.cli.batch:batch",

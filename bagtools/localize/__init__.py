@@ -1,9 +1,17 @@
-"""Localization in a map the robot already has (issue #26; the first part: the global search).
+"""Localization in a map the robot already has (``bagtools localize``, issue #26).
 
 - :class:`GlobalLocalizer`: where one scan can be in a nav2 map, anywhere and at
   any heading, with no initial pose: the distinct places that match it, best first.
+- :class:`MapLocalizer`: the scans of a bag tracked in the map: searched for,
+  confirmed among look-alike places, tracked, lost and recovered.
+- :class:`LocalizePipeline`: a bag in a nav2 map, with the bag's own localizer
+  (AMCL's map -> odom) and ground truth compared; :func:`write_localize` its files.
 """
 
 from bagtools.localize.global_search import GlobalLocalizer, Hypothesis
+from bagtools.localize.pipeline import LocalizeOptions, LocalizePipeline, LocalizeResult
+from bagtools.localize.tracker import MapLocalizer
+from bagtools.localize.writer import LOCALIZE_FILES, write_localize
 
-__all__ = ["GlobalLocalizer", "Hypothesis"]
+__all__ = ["LOCALIZE_FILES", "GlobalLocalizer", "Hypothesis", "LocalizeOptions", "LocalizePipeline", "LocalizeResult",
+           "MapLocalizer", "write_localize"]

@@ -150,6 +150,22 @@ class CorrelativeReference:
         raster = np.rint(likelihood * RASTER_MAX).astype(np.uint16)
         return cls(res, sigma, len(pts), lo * res, raster)
 
+    def score(self, points_m: np.ndarray, pose: np.ndarray) -> float:
+        """The score :func:`match_scans_grid` gives ``points_m`` ((N, 2), their own frame, m) at ``pose``
+        [x, y, theta] in this reference's frame, without a search: the mean raster likelihood in [0, 1]
+        (points off the raster count 0; 0.0 for no finite point)."""
+        pts = finite_points(points_m, "points")
+        if len(pts) == 0:
+            return 0.0
+        x, y, theta = (float(v) for v in pose)
+        c, s = math.cos(theta), math.sin(theta)
+        moved = pts @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+        cells = np.floor((moved - self.origin) / self.resolution_m).astype(np.intp)
+        nx, ny = self.raster.shape
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < nx) & (cells[:, 1] >= 0) & (cells[:, 1] < ny)
+        total = int(self.raster[cells[inside, 0], cells[inside, 1]].sum(dtype=np.int64))
+        return total / (len(pts) * RASTER_MAX)
+
     def pyramid(self, depth: int, pad_lo: tuple[int, int], pad_hi: tuple[int, int]) -> _Pyramid:
         """Levels 0..``depth`` with at least ``pad_lo``/``pad_hi`` zero cells (x, y) around the raster (cached)."""
         if self._pyramid:

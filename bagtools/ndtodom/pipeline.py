@@ -156,6 +156,29 @@ class NdtOdomResult:
         return self.trajectory.poses if self.trajectory is not None else np.zeros((0, 4, 4))
 
 
+@dataclass
+class ScanInputs:
+    """The scans of a bag as the front end takes them.
+
+    ``stamps_ns`` (N,) int64 header stamps of the usable scans, in stamp order;
+    ``points`` their valid returns (M_k, 2) in the scan frame (m); ``order`` the
+    order to register them in (their recording order, :meth:`NdtOdomPipeline._order`);
+    ``odometry`` (T_odom_base (N, 4, 4), valid (N,)) at the stamps, None without
+    odometry; ``T_base_scan`` (4, 4) the laser's mount on the robot base.
+    """
+
+    stamps_ns: np.ndarray
+    points: list[np.ndarray]
+    order: np.ndarray
+    odometry: tuple[np.ndarray, np.ndarray] | None
+    T_base_scan: np.ndarray
+
+    def points_base(self, k: int) -> np.ndarray:
+        """Scan ``k``'s points (M, 2) in the robot base frame (m)."""
+        R, t = self.T_base_scan[:2, :2], self.T_base_scan[:2, 3]
+        return self.points[k] @ R.T + t
+
+
 class NdtOdomPipeline:
     """Laser odometry of one bag (see the module docstring)."""
 
@@ -178,22 +201,36 @@ class NdtOdomPipeline:
         self.reordered = 0
         self.repeated = 0
 
+    def read_inputs(self, bag: BagReader) -> ScanInputs:
+        """What the front end is fed, read from the open ``bag``, nothing matched: the usable scans, the
+        order to register them in, the odometry at their stamps, the laser's mount (see :class:`ScanInputs`).
+        The pipeline's frames, counts and warnings are set on the way."""
+        self._require_scan_topic(bag)
+        self._load_odometry(bag)
+        stamps, points = self._read_scans(bag)
+        self.warnings[:0] = list(bag.warnings)
+        self._scan_offset(stamps)
+        if len(stamps) == 0:
+            return ScanInputs(stamps, points, np.zeros(0, dtype=np.intp), None, self.T_base_scan)
+        order = self._order(stamps)
+        odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
+        return ScanInputs(stamps, points, order, odometry, self.T_base_scan)
+
+    def no_scan_problem(self) -> str:
+        """Why there is no usable scan, in words (after :meth:`read_inputs` found none)."""
+        return (f"no usable scan on {self.options.topic}: every scan was skipped "
+                f"({', '.join(f'{n} {r}' for r, n in self.skipped.items()) or 'none recorded'})")
+
     def run(self) -> NdtOdomResult:
         with open_bag(self.bag_path) as bag:
-            self._require_scan_topic(bag)
-            self._load_odometry(bag)
-            stamps, points = self._read_scans(bag)
-            self.warnings[:0] = list(bag.warnings)
-            self._scan_offset(stamps)
+            inputs = self.read_inputs(bag)
+            stamps, points = inputs.stamps_ns, inputs.points
             if self.options.init == "odom" and not self._has_odometry():
                 raise BagtoolsError(f"--init odom needs wheel odometry, but the bag has no {ODOM_TOPIC} and no "
                                     f"'{self.odom_frame}' frame with a child in /tf (use --init auto)", self.bag_path)
             if len(stamps) == 0:
-                problem = (f"no usable scan on {self.options.topic}: every scan was skipped "
-                           f"({', '.join(f'{n} {r}' for r, n in self.skipped.items()) or 'none recorded'})")
-                return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), problem)
-            order = self._order(stamps)
-            odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
+                return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), self.no_scan_problem())
+            order, odometry = inputs.order, inputs.odometry
             t0 = time.perf_counter()
             front = self._register(stamps[order], [points[i] for i in order],
                                    None if odometry is None else (odometry[0][order], odometry[1][order]))

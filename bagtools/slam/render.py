@@ -33,9 +33,11 @@ def _view(grid: OccupancyGrid, probability: np.ndarray, trajectory_xy: np.ndarra
 
 
 def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_segments: np.ndarray,
-                        title: str = "", width_px: int = 1600) -> bytes:
+                        title: str = "", width_px: int = 1600,
+                        marks: list[tuple[str, np.ndarray, str, str]] = ()) -> bytes:
     """A PNG of the map (grey: white free, black occupied, mid-grey unknown), the trajectory (N,2) in red
-    and each accepted loop (L,2,2: old and new keyframe positions, m) as a green segment."""
+    (NaN rows break it), each accepted loop (L,2,2: old and new keyframe positions, m) as a green segment,
+    and ``marks``: (legend label, places (K,2) m, matplotlib marker, colour) drawn over the rest."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
@@ -64,10 +66,16 @@ def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_seg
     if len(segments):
         ax.add_collection(LineCollection(segments, colors="tab:green", linewidths=0.8, alpha=0.8,
                                          label=f"loop closures ({len(segments)})"))
-    if len(traj):
+    known = traj[np.isfinite(traj).all(axis=1)]
+    if len(known):
         ax.plot(traj[:, 0], traj[:, 1], color="tab:red", linewidth=0.8, label="trajectory")
-        ax.plot(traj[0, 0], traj[0, 1], "o", color="tab:blue", markersize=5, label="start")
-        ax.plot(traj[-1, 0], traj[-1, 1], "s", color="tab:purple", markersize=5, label="end")
+        ax.plot(known[0, 0], known[0, 1], "o", color="tab:blue", markersize=5, label="start")
+        ax.plot(known[-1, 0], known[-1, 1], "s", color="tab:purple", markersize=5, label="end")
+    for label, xy, marker, colour in marks:
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(xy):
+            ax.plot(xy[:, 0], xy[:, 1], marker, color=colour, markersize=9, markeredgewidth=2, linestyle="none",
+                    label=f"{label} ({len(xy)})")
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")

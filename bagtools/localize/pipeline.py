@@ -1,0 +1,260 @@
+"""``bagtools localize``: where the robot was in a map it already has, at every scan of a bag.
+
+    LocalizePipeline(bag, options).run()
+        _read()           the map; the scans, their order and odometry, as ndt-odom reads them
+        _localize()       every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track
+        _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
+        _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
+        _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
+
+Frames: poses are the robot base's in the map frame (the nav2 map's); the
+correction a localizer publishes is T_map_odom = T_map_base T_odom_base^-1.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bagtools.errors import BagtoolsError
+from bagtools.grid import Nav2Map, read_nav2_map
+from bagtools.io import open_bag
+from bagtools.localize.tracker import AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, Event, MapLocalizer
+from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
+from bagtools.progress import progress
+from bagtools.simtruth import read_ground_truth
+from bagtools.slam.evaluate import ape_aligned
+from bagtools.trajectory import ErrorStats, Trajectory, ape_translation
+from bagtools.transforms import pose2tform, se2_between, tform2pose
+
+MAP_FRAME = "map"
+#: Where our poses and the bag's own localizer part by more than this (m, deg), the comparison says so.
+PART_M, PART_DEG = 0.3, 10.0
+
+
+@dataclass(frozen=True)
+class LocalizeOptions:
+    """What to localize and how: the scan ``topic``; ``initial_pose`` [x, y, yaw] of the base in the map
+    (None: search the whole map); ``use_odometry`` (the wheels' motion as the prior of each scan);
+    ``scan_frame_offset`` (x, y, yaw) of the laser on the base when tf lacks it."""
+
+    topic: str = "/scan"
+    initial_pose: tuple[float, float, float] | None = None
+    use_odometry: bool = True
+    scan_frame_offset: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name, value in (("--initial-pose", self.initial_pose), ("--scan-frame-offset", self.scan_frame_offset)):
+            if value is not None and (len(value) != 3 or not all(math.isfinite(float(v)) for v in value)):
+                raise BagtoolsError(f"{name} must be three finite numbers X,Y,YAW, got {value!r}")
+
+
+@dataclass
+class LocalizeResult:
+    """One bag localized in one map.
+
+    ``stamps_ns`` (N,) of every usable scan (stamp order) with ``poses`` (N, 3) [x, y, theta] of the base in
+    the map (NaN where unknown: before the first fix, while lost), ``scores`` (N,) and ``states`` (N,);
+    ``trajectory`` the known poses as a Trajectory, ``map_to_odom`` the correction at them (None without
+    odometry); ``bag_localizer`` the bag's own map -> base at the scan stamps (None when it has none);
+    ``ground_truth`` the simulator's (None otherwise); ``events`` fixes, losses and recoveries.
+    """
+
+    nav2_map: Nav2Map
+    stamps_ns: np.ndarray
+    poses: np.ndarray
+    scores: np.ndarray
+    states: np.ndarray
+    events: list[Event]
+    trajectory: Trajectory
+    map_to_odom: Trajectory | None
+    bag_localizer: Trajectory | None
+    ground_truth: Trajectory | None
+    summary: dict
+    base_frame: str = "base_link"
+    scan_frame: str = ""
+    T_base_scan: np.ndarray = field(default_factory=lambda: np.eye(4))
+    scans: list = field(default_factory=list)
+
+
+class LocalizePipeline:
+    """Localizes one bag in one nav2 map (see the module docstring); ``keep_scans`` for results.mcap."""
+
+    def __init__(self, bag_path: str | Path, map_yaml: str | Path, options: LocalizeOptions | None = None,
+                 keep_scans: bool = False) -> None:
+        self.bag_path = Path(bag_path)
+        self.map_yaml = Path(map_yaml)
+        self.options = options or LocalizeOptions()
+        self.keep_scans = keep_scans
+        self.warnings: list[str] = []
+
+    def run(self) -> LocalizeResult:
+        nav2_map = read_nav2_map(self.map_yaml)
+        with open_bag(self.bag_path) as bag:
+            dataset, inputs = self._read(bag)
+            localizer, elapsed_s = self._localize(nav2_map, inputs)
+            own = self._bag_localizer(dataset, inputs)
+            truth = self._ground_truth(bag, dataset)
+        self.warnings = list(dict.fromkeys(dataset.warnings + self.warnings))
+        stamps = inputs.stamps_ns
+        poses = np.full((len(stamps), 3), np.nan)
+        scores = np.zeros(len(stamps))
+        states = np.empty(len(stamps), dtype=object)
+        for step, k in enumerate(inputs.order):  # the localizer saw the scans in recording order
+            states[k] = localizer.states[step]
+            scores[k] = localizer.scores.get(step, 0.0)
+            if step in localizer.poses:
+                poses[k] = localizer.poses[step]
+        events = [Event(e.kind, int(inputs.order[e.index]), e.stamp_ns, e.pose) for e in localizer.events]
+        known = np.isfinite(poses).all(axis=1)
+        if not known.any():
+            raise BagtoolsError(f"no scan on {self.options.topic} could be placed in the map {self.map_yaml}: none of "
+                                f"the {len(stamps)} scans matched one place of it well enough (a bag from another "
+                                "place, or a map that repeats itself everywhere the robot went?)", self.bag_path)
+        trajectory = Trajectory(stamps[known], pose2tform(poses[known]))
+        map_to_odom = None
+        if inputs.odometry is not None:
+            T_odom_base = inputs.odometry[0][known]
+            map_to_odom = Trajectory(stamps[known], trajectory.poses @ np.linalg.inv(T_odom_base))
+        result = LocalizeResult(nav2_map, stamps, poses, scores, states, events, trajectory, map_to_odom, own, truth,
+                                {}, dataset.base_frame or dataset.scan_frame, dataset.scan_frame, inputs.T_base_scan,
+                                dataset.scans)
+        result.summary = self._summary(result, localizer, elapsed_s)
+        return result
+
+    # -- steps ------------------------------------------------------------------------------------
+
+    def _read(self, bag) -> tuple[NdtOdomPipeline, ScanInputs]:
+        """The scans as ndt-odom reads them: usable scans, recording order, odometry at the stamps, mount."""
+        dataset = NdtOdomPipeline(self.bag_path, NdtOdomOptions(
+            topic=self.options.topic, use_odometry=self.options.use_odometry,
+            scan_frame_offset=self.options.scan_frame_offset), keep_scans=self.keep_scans)
+        inputs = dataset.read_inputs(bag)
+        if len(inputs.stamps_ns) == 0:
+            raise BagtoolsError(dataset.no_scan_problem(), self.bag_path)
+        return dataset, inputs
+
+    def _localize(self, nav2_map: Nav2Map, inputs: ScanInputs) -> tuple[MapLocalizer, float]:
+        """Every scan, in recording order, through the localizer; returns it and the seconds it took."""
+        points = nav2_map.occupied_points()
+        try:
+            localizer = MapLocalizer(points, nav2_map.resolution_m,
+                                     None if self.options.initial_pose is None else np.array(self.options.initial_pose))
+        except ValueError as err:
+            raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
+        odom = None
+        if inputs.odometry is not None:
+            odom = np.where(inputs.odometry[1][:, None], tform2pose(inputs.odometry[0]), np.nan)
+        t0 = time.perf_counter()
+        for step, k in enumerate(progress(inputs.order, total=len(inputs.order), desc="localizing", unit="scan")):
+            pose = None if odom is None or not np.isfinite(odom[k]).all() else odom[k]
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), pose)
+        return localizer, time.perf_counter() - t0
+
+    def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
+        """The bag's own map -> base at the scan stamps (its localizer's map -> odom on /tf, composed), or None."""
+        buffer, base = dataset.buffer, dataset.base_frame
+        if buffer is None or base is None or not buffer.has_frame(MAP_FRAME) or not buffer.can_transform(MAP_FRAME, base):
+            return None
+        T, ok = buffer.lookup(MAP_FRAME, base, inputs.stamps_ns, return_mask=True)
+        return Trajectory(inputs.stamps_ns[ok], T[ok]) if ok.any() else None
+
+    def _ground_truth(self, bag, dataset: NdtOdomPipeline) -> Trajectory | None:
+        """The simulator's /ground_truth of the base (map frame), or None."""
+        truth = read_ground_truth(bag, warnings=self.warnings)
+        if truth is None or dataset.buffer is None:
+            return None
+        stamps, T_map_gt, child = truth
+        child, base = child.lstrip("/"), dataset.base_frame or dataset.scan_frame
+        if child == base:
+            return Trajectory(stamps, T_map_gt)
+        if dataset.buffer.can_transform(child, base):
+            return Trajectory(stamps, T_map_gt @ dataset.buffer.lookup(child, base, None))
+        self.warnings.append(f"ground truth is of {child}, which tf does not connect to {base}: not evaluated")
+        return None
+
+    def _summary(self, result: LocalizeResult, localizer: MapLocalizer, elapsed_s: float) -> dict:
+        stamps = result.stamps_ns
+        duration_s = max((int(stamps[-1]) - int(stamps[0])) * 1e-9, 1e-9)
+        fixes = [e for e in result.events if e.kind == "fix"]
+        counts = {state: int(np.count_nonzero(result.states == state))
+                  for state in (SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, LOST)}
+        summary: dict = {
+            "bag": str(self.bag_path),
+            "map": str(self.map_yaml),
+            "topic": self.options.topic,
+            "base_frame": result.base_frame,
+            "scans": len(stamps),
+            "scans_localized": int(np.isfinite(result.poses).all(axis=1).sum()),
+            "states": counts,
+            "first_fix": None if not fixes else {
+                "scan": fixes[0].index, "stamp_ns": fixes[0].stamp_ns,
+                "seconds_after_first_scan": (fixes[0].stamp_ns - int(stamps[0])) * 1e-9},
+            "lost": sum(e.kind == "lost" for e in result.events),
+            "recovered": sum(e.kind == "recovered" for e in result.events),
+            "events": [{"kind": e.kind, "scan": e.index, "stamp_ns": e.stamp_ns,
+                        "pose_xy_yaw": [float(v) for v in e.pose]} for e in result.events],
+            "global_searches": localizer.searches,
+            "odometry_used": result.map_to_odom is not None,
+            "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
+            "per_scan": {"stamp_ns": [int(s) for s in stamps], "state": [str(s) for s in result.states],
+                         "score": [round(float(s), 4) for s in result.scores]},
+            "options": asdict(self.options),
+        }
+        localized = result.scores[np.isfinite(result.poses).all(axis=1)]
+        if localized.size:
+            summary["score"] = ErrorStats.of(localized).as_dict()
+        if counts[AMBIGUOUS]:
+            self.warnings.append(f"{counts[AMBIGUOUS]} scan(s) matched several places of the map alike for longer "
+                                 f"than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats itself)")
+        if summary["lost"]:
+            places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})"
+                               for e in result.events if e.kind == "lost")
+            self.warnings.append(f"lost {summary['lost']} time(s), recovered {summary['recovered']}: {places}")
+        if result.bag_localizer is not None:
+            summary["bag_localizer"] = self._compare(result.trajectory, result.bag_localizer)
+        if result.ground_truth is not None:
+            summary["ground_truth"] = {name: _errors(result.ground_truth, traj) for name, traj in
+                                       (("ours", result.trajectory), ("bag_localizer", result.bag_localizer))
+                                       if traj is not None and len(traj)}
+        summary["warnings"] = self.warnings
+        return summary
+
+    def _compare(self, ours: Trajectory, theirs: Trajectory) -> dict:
+        """Our poses against the bag's own localizer's over time, and where they part (see PART_M, PART_DEG)."""
+        common, a, b = np.intersect1d(ours.stamps_ns, theirs.stamps_ns, return_indices=True)
+        if common.size == 0:
+            return {"scans_compared": 0}
+        d = se2_between(tform2pose(theirs.poses[b]), tform2pose(ours.poses[a]))
+        dist, heading = np.hypot(d[:, 0], d[:, 1]), np.degrees(np.abs(d[:, 2]))
+        apart = (dist > PART_M) | (heading > PART_DEG)
+        parts = []
+        edges = np.flatnonzero(np.diff(np.r_[0, apart.astype(np.int8), 0]))
+        for start, end in zip(edges[::2], edges[1::2]):
+            parts.append({"from_ns": int(common[start]), "to_ns": int(common[end - 1]),
+                          "max_translation_m": float(dist[start:end].max()),
+                          "max_heading_deg": float(heading[start:end].max())})
+        if parts:
+            self.warnings.append(f"the bag's own localizer and ours part by more than {PART_M} m or {PART_DEG} deg "
+                                 f"in {len(parts)} stretch(es), first at {parts[0]['from_ns'] * 1e-9:.2f} s")
+        return {"scans_compared": int(common.size), "translation_m": ErrorStats.of(dist).as_dict(),
+                "heading_deg": ErrorStats.of(heading).as_dict(), "threshold": {"m": PART_M, "deg": PART_DEG},
+                "parts": parts, "difference": {"stamp_ns": [int(s) for s in common],
+                                               "translation_m": [round(float(v), 4) for v in dist],
+                                               "heading_deg": [round(float(v), 3) for v in heading]}}
+
+
+def _errors(truth: Trajectory, estimate: Trajectory) -> dict:
+    """APE of ``estimate`` against ``truth``: as it is (the map's frame is the truth's for a map of the same
+    world), and after the best SE(2) alignment (a map made by SLAM has its own frame)."""
+    out: dict = {}
+    for name, fn in (("ape_m", ape_translation), ("ape_aligned_m", ape_aligned)):
+        try:
+            out[name] = fn(truth, estimate).as_dict()
+        except BagtoolsError as err:
+            out[name] = {"unavailable": err.problem}
+    return out

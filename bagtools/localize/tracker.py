@@ -1,0 +1,310 @@
+"""Where the robot is in a map it already has, scan by scan, from no initial pose.
+
+:class:`MapLocalizer` takes the scans in recording order (points in the robot
+base frame, with the wheel odometry's pose when the bag has it) and keeps one
+or more hypotheses of the base's pose in the map:
+
+- **searching**: no hypothesis. The global search (:class:`GlobalLocalizer`)
+  places the scan anywhere in the map at any heading; its distinct places
+  (a symmetric room gives several) become the hypotheses.
+- **confirming**: every hypothesis follows the robot (each scan tracked against
+  the map, below); one that stops matching is dropped. The best is committed
+  once it has matched ``CONFIRM_SCANS`` scans and beats every other by
+  ``CONFIRM_MARGIN`` in mean score over them (and scores ``FIX_SCORE``): the
+  first fix. Hypotheses the scans do not tell apart by then are *ambiguous*,
+  and a map that repeats itself stays so until the robot sees what tells the
+  places apart. The committed hypothesis' earlier poses
+  are kept: the trajectory covers the scans since its search.
+- **tracking**: each scan matched against the map (not against the previous
+  scan), from the previous pose moved by the odometry step (or, without
+  odometry, by the last step's velocity): NDT on the map's normal distributions,
+  and a correlative window search first when the motion is unknown or NDT's
+  result is poor or far from the prior. A scan scoring under ``LOST_RATIO`` of
+  the typical score ``LOST_SCANS`` times in a row means the robot is lost
+  (kidnapped, or the map no longer fits): it is counted, said, and searched for
+  again.
+
+Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base +
+[x, y]``); scores are :meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
+from bagtools.ndt import NdtReference, match_scans, match_scans_grid
+from bagtools.ndtodom.frontend import (
+    CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
+    PRIOR_WEIGHT_DEFAULT,
+)
+from bagtools.transforms import se2_between, se2_compose
+
+#: A hypothesis is committed after matching this many scans (its search's scan included)...
+CONFIRM_SCANS = 5
+#: ... when its mean score over them beats every other hypothesis' by this much, and is at least FIX_SCORE (a bag
+#: from another place matches some walls of any map, at scores of 0.15 to 0.5; the right place scores 0.7 to 0.95
+#: on simulated bags and 0.9 on the CSAIL log's map).
+CONFIRM_MARGIN = 0.05
+FIX_SCORE = 0.5
+#: A scan scoring under this share of the typical (median recent) score is poorly matched (a map that lacks
+#: part of what the robot sees lowers the score gradually; a kidnap drops it to chance)...
+LOST_RATIO = 0.35
+#: ... and this many poorly matched scans in a row mean the robot is lost.
+LOST_SCANS = 3
+#: No score under this is a match, whatever is typical.
+MIN_SCORE = 0.15
+#: Scores kept for the typical score.
+TYPICAL_SCANS = 50
+#: The window searched around the prior when the motion is unknown or NDT's result is poor (m, m, rad).
+WINDOW = (0.5, 0.5, 0.4)
+#: NDT's result is not trusted when it moves this far from its prior (m, rad).
+NDT_JUMP = (0.25, 0.15)
+#: The window search overrules the motion only when it scores this much more than NDT held by the motion.
+SWITCH_MARGIN = 0.1
+#: NDT's result is taken unless it scores this much under its start (it diverged).
+DIVERGED_SCORE = 0.05
+#: Cell of the map's normal distributions (m).
+NDT_CELL_M = 0.5
+#: Hypotheses at most this many; a search that finds none is repeated this many scans later.
+MAX_HYPOTHESES = 4
+SEARCH_EVERY_SCANS = 5
+
+SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, LOST = "searching", "confirming", "ambiguous", "tracking", "lost"
+
+
+@dataclass
+class _Hypothesis:
+    """One place the robot may be: its pose now, the poses and scores of the scans it matched, its misses."""
+
+    pose: np.ndarray
+    since: int  # the scan it was born at
+    poses: dict[int, np.ndarray] = field(default_factory=dict)
+    scores: list[float] = field(default_factory=list)
+    misses: int = 0
+    velocity: np.ndarray | None = None  # the last step's motion per second (base frame), without odometry
+    stamp_ns: int = 0
+    continued: bool = False  # where the robot was before it was lost, moved by the motion since
+
+
+@dataclass
+class Event:
+    """Something the localizer did: ``kind`` 'fix' (committed), 'lost' or 'recovered', at scan ``index``
+    (stamp ``stamp_ns``) and map pose ``pose`` (the last good pose for 'lost')."""
+
+    kind: str
+    index: int
+    stamp_ns: int
+    pose: np.ndarray
+
+
+class MapLocalizer:
+    """Tracks a robot in a map (see the module docstring).
+
+    Args:
+        map_points: (N, 2) occupied places of the map, map frame, metres.
+        resolution_m: the map's cell (the rasters' and the refinement's).
+        initial_pose: [x, y, theta] of the base at the first scan, when known (then no global search at the
+            start: the first scan is searched within WINDOW of it).
+    """
+
+    def __init__(self, map_points: np.ndarray, resolution_m: float = 0.05,
+                 initial_pose: np.ndarray | None = None) -> None:
+        self.search = GlobalLocalizer(map_points, fine_m=resolution_m)
+        self.fine = self.search.fine
+        self.ndt = NdtReference.from_points(map_points, cell_size=NDT_CELL_M, cell_model="widened")
+        self.hypotheses: list[_Hypothesis] = []
+        self.committed: _Hypothesis | None = None
+        self.poses: dict[int, np.ndarray] = {}  # scan index -> map pose, once known
+        self.scores: dict[int, float] = {}
+        self.states: list[str] = []
+        self.events: list[Event] = []
+        self.typical: deque[float] = deque(maxlen=TYPICAL_SCANS)
+        self.searches = 0
+        self._next_search = 0
+        self._initial = None if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
+        self._lost_since: int | None = None
+        self._continued: _Hypothesis | None = None
+        self._last_odom: np.ndarray | None = None
+        self._last_stamp: int | None = None
+
+    # -- one scan -------------------------------------------------------------------------------
+
+    def step(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> str:
+        """Localize scan ``index`` (points (M, 2) in the base frame; ``odom`` the base's odometry pose
+        [x, y, theta] or None); returns its state: 'searching' (no place matches yet), 'confirming' (places
+        followed for fewer than CONFIRM_SCANS scans), 'ambiguous' (places the scans do not tell apart yet),
+        'tracking' or 'lost'."""
+        motion = None
+        if odom is not None and self._last_odom is not None:
+            motion = se2_between(self._last_odom, odom)
+        dt = 0.0 if self._last_stamp is None else max(0.0, (stamp_ns - self._last_stamp) * 1e-9)
+        self._last_odom, self._last_stamp = odom, stamp_ns
+        if self.committed is not None:
+            state = self._track_committed(index, stamp_ns, points, motion, dt)
+        else:
+            state = self._confirm(index, stamp_ns, points, motion, dt)
+        self.states.append(state)
+        return state
+
+    def _track_committed(self, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None,
+                         dt: float) -> str:
+        h = self.committed
+        score = self._follow(h, index, stamp_ns, points, motion, dt)
+        if h.misses < LOST_SCANS:
+            self.poses[index], self.scores[index] = h.pose.copy(), score
+            if h.misses == 0:
+                self.typical.append(score)
+            return TRACKING
+        last_good = max(k for k in h.poses if k not in self._recent_misses(h, index))
+        self.events.append(Event("lost", index, stamp_ns, h.poses[last_good]))
+        for k in range(index - LOST_SCANS + 1, index + 1):  # the poorly matched scans are not trusted
+            self.poses.pop(k, None)
+        self.committed, self.hypotheses = None, []
+        self._continued = h  # searched again with the global search's places: the robot may not have moved
+        self._lost_since = index
+        self._next_search = index + 1
+        return LOST
+
+    def _recent_misses(self, h: _Hypothesis, index: int) -> set[int]:
+        return set(range(index - h.misses + 1, index + 1))
+
+    def _confirm(self, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None, dt: float) -> str:
+        if not self.hypotheses:
+            if index < self._next_search:
+                return LOST if self._lost_since is not None else SEARCHING
+            self._start(index, stamp_ns, points)
+            if not self.hypotheses:
+                self._next_search = index + SEARCH_EVERY_SCANS
+                return LOST if self._lost_since is not None else SEARCHING
+        else:
+            for h in self.hypotheses:
+                self._follow(h, index, stamp_ns, points, motion, dt)
+            self.hypotheses = self._distinct([h for h in self.hypotheses if h.misses < LOST_SCANS])
+        if self.hypotheses and self._decide(index, stamp_ns):
+            return TRACKING
+        if self.hypotheses:
+            return AMBIGUOUS if max(len(h.scores) for h in self.hypotheses) >= CONFIRM_SCANS else CONFIRMING
+        return LOST if self._lost_since is not None else SEARCHING
+
+    def _start(self, index: int, stamp_ns: int, points: np.ndarray) -> None:
+        """New hypotheses for scan ``index``: the initial pose's window, or the global search."""
+        if self._initial is not None and not self.events:
+            found = match_scans_grid(points, self.fine, initial_pose=self._initial, search_range=(1.0, 1.0, 0.5))
+            places = [found.pose] if found.ok else []
+        else:
+            self.searches += 1
+            places = [h.pose for h in self.search.search(points, max_hypotheses=MAX_HYPOTHESES)]
+        for pose in places:
+            pose, score = self._refine(points, np.asarray(pose, dtype=np.float64))
+            if score >= MIN_SCORE:
+                h = _Hypothesis(pose, index, stamp_ns=stamp_ns)
+                h.poses[index] = pose.copy()
+                h.scores.append(score)
+                self.hypotheses.append(h)
+        if self._continued is not None:  # the lost pose, moved by the motion since, competes with the places
+            lost, self._continued = self._continued, None
+            h = _Hypothesis(lost.pose.copy(), index, stamp_ns=stamp_ns, continued=True)
+            h.velocity = lost.velocity
+            self._follow(h, index, stamp_ns, points, None, 0.0)
+            if h.misses == 0:
+                self.hypotheses = [h] + [o for o in self.hypotheses if not _near(o.pose, h.pose, SEPARATION)]
+
+    def _decide(self, index: int, stamp_ns: int) -> bool:
+        """Commit the best hypothesis if it has held long enough and stands out (see the module docstring)."""
+        means = [float(np.mean(h.scores[-CONFIRM_SCANS:])) for h in self.hypotheses]
+        order = np.argsort(means)[::-1]
+        best = self.hypotheses[order[0]]
+        rivals = [self.hypotheses[i] for i in order[1:] if means[order[0]] - means[i] < CONFIRM_MARGIN]
+        if rivals and any(h.continued for h in [best, *rivals]):
+            best, rivals = next(h for h in [best, *rivals] if h.continued), []  # alike: the motion decides
+        if len(best.scores) < CONFIRM_SCANS or rivals or np.mean(best.scores[-CONFIRM_SCANS:]) < FIX_SCORE:
+            return False
+        self.committed, self.hypotheses = best, [best]
+        self.typical.extend(best.scores)
+        for (k, pose), score in zip(best.poses.items(), best.scores):  # the scans since its search, in hindsight
+            self.poses[k], self.scores[k] = pose, score
+        kind = "recovered" if self._lost_since is not None else "fix"
+        self.events.append(Event(kind, index, stamp_ns, best.pose.copy()))
+        self._lost_since = None
+        return True
+
+    def _distinct(self, hypotheses: list[_Hypothesis]) -> list[_Hypothesis]:
+        """Hypotheses that came to the same place are one (the better scoring one)."""
+        kept: list[_Hypothesis] = []
+        for h in sorted(hypotheses, key=lambda h: -float(np.mean(h.scores[-CONFIRM_SCANS:]))):
+            if all(not _near(h.pose, k.pose, SEPARATION) for k in kept):
+                kept.append(h)
+        return kept
+
+    # -- matching -------------------------------------------------------------------------------
+
+    def _follow(self, h: _Hypothesis, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None,
+                dt: float) -> float:
+        """Move hypothesis ``h`` to scan ``index``: prior from the motion, matched against the map."""
+        step, sd = None, None
+        if motion is not None:
+            step = motion
+            sd = np.array([ODOM_NOISE_M, ODOM_NOISE_M, ODOM_NOISE_RAD]) + np.array(
+                [ODOM_NOISE_RATIO, ODOM_NOISE_RATIO, 0.0]) * math.hypot(step[0], step[1]) + np.array(
+                [0.0, 0.0, ODOM_TURN_NOISE_RATIO]) * abs(step[2])
+        elif h.velocity is not None and dt > 0:
+            step = h.velocity * dt
+            sd = np.array([CV_STEADY_M, CV_STEADY_M, CV_STEADY_RAD]) + CV_STEADY_RATIO * np.abs(
+                np.array([math.hypot(step[0], step[1])] * 2 + [step[2]]))
+        prior = h.pose.copy() if step is None else se2_compose(h.pose, step)
+        pose, score = self._match(points, prior, sd)
+        if score >= self._poor():
+            if dt > 0 and motion is None:
+                h.velocity = se2_between(h.pose, pose) / dt
+            h.pose, h.misses = pose, 0
+        else:
+            h.pose, h.misses = prior, h.misses + 1
+            h.velocity = None
+        h.poses[index] = h.pose.copy()
+        h.scores.append(score)
+        h.stamp_ns = stamp_ns
+        return score
+
+    def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None) -> tuple[np.ndarray, float]:
+        """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
+        its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
+        first when the motion is unknown, or when NDT's result is poor or far from the prior."""
+        held = None
+        if sd is not None:
+            pose, score = held = self._refine(points, prior, prior, sd)
+            jump = se2_between(prior, pose)
+            if score >= self._poor() and math.hypot(jump[0], jump[1]) <= NDT_JUMP[0] and abs(jump[2]) <= NDT_JUMP[1]:
+                return pose, score
+        found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=WINDOW)
+        start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
+        searched = self._refine(points, start, prior if sd is not None else None, sd)
+        if held is not None and searched[1] < held[1] + SWITCH_MARGIN:
+            return held  # the scan does not clearly say the motion is wrong (a map missing what the robot sees)
+        return searched
+
+    def _refine(self, points: np.ndarray, start: np.ndarray, prior: np.ndarray | None = None,
+                sd: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """NDT against the map from ``start`` (a MAP estimate with the Gaussian ``prior``/``sd`` when given) and
+        the raster's score there; the start is kept when NDT lands clearly worse (it diverged)."""
+        information = None if prior is None else (prior, 8.0 * len(points) * PRIOR_WEIGHT_DEFAULT * np.diag(1.0 / sd**2))
+        result = match_scans(points, self.ndt, initial_pose=start, prior=information)
+        refined = np.asarray(result.pose, dtype=np.float64)
+        score, before = self.fine.score(points, refined), self.fine.score(points, start)
+        return (refined, score) if score >= before - DIVERGED_SCORE else (start, before)
+
+    def _poor(self) -> float:
+        """Scores under this are poor matches: LOST_RATIO of the typical score, and never under MIN_SCORE."""
+        return max(MIN_SCORE, LOST_RATIO * self._typical())
+
+    def _typical(self) -> float:
+        return float(np.median(self.typical)) if self.typical else 0.0
+
+
+def _near(a: np.ndarray, b: np.ndarray, tol: tuple[float, float]) -> bool:
+    d = se2_between(a, b)
+    return math.hypot(d[0], d[1]) < tol[0] and abs(d[2]) < tol[1]
