@@ -1,4 +1,22 @@
-"""Global localization (``bagtools.localize``): one scan placed in a whole map, any heading, no initial pose.
+"""Localization (``bagtools localize``): simulated bags tracked in the map of another route, and the global search.
+
+Simulated (always): a 120 s figure eight (seed 5) localized in the map of a
+120 s lap (seed 1): the lap's ground-truth grid, and the map ``bagtools slam``
+makes of it. Rows, each with its baseline from the same run:
+
+- tracking speed, bag seconds per wall second of the localizer, against the
+  laser odometry (ndt-odom's front end) on the same scans. Target >= 50x;
+- APE against /ground_truth (the map's frame is the world's for the ground-truth
+  grid; after SE(2) alignment for the SLAM map), against the simulator's
+  AMCL-like localizer (its map -> odom) in the same bag. Target <= 1 cm;
+- first fix within 2 s of bag time, at the place (5 cm), from 100 random starts
+  with no initial pose, against the global search's best place of the start scan
+  alone. Target >= 95 of 100;
+- a kidnap (the scans jump 2.5 m mid-bag, the odometry does not): seconds from
+  it to the recovered fix, against the seconds to the first fix at the start.
+  Target <= 3 s.
+
+The global search (CSAIL, skipped when absent):
 
 The map: the CSAIL building (``../shared/data/real/csail_scans``, skipped when
 absent) mapped at 5 cm from its reference poses with returns up to 20 m (as
@@ -30,6 +48,93 @@ SIDE_M = 100.0
 
 
 def run(quick: bool) -> list[Row]:
+    return _simulated_rows(quick) + _global_rows(quick)
+
+
+def _sequence(bag: Path):
+    from bagtools.io import open_bag
+    from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
+    from bagtools.simtruth import read_ground_truth
+    from bagtools.transforms import tform2pose
+
+    dataset = NdtOdomPipeline(bag, NdtOdomOptions())
+    with open_bag(bag) as reader:
+        inputs = dataset.read_inputs(reader)
+        stamps, T, _ = read_ground_truth(reader)
+    truth = tform2pose(T)[np.searchsorted(stamps, inputs.stamps_ns).clip(0, len(stamps) - 1)]
+    return inputs, tform2pose(inputs.odometry[0]), truth
+
+
+def _simulated_rows(quick: bool) -> list[Row]:
+    from bagtools.grid import read_nav2_map, write_nav2_map
+    from bagtools.gridmap import GridMapOptions, GridMapPipeline
+    from bagtools.localize import LocalizePipeline, MapLocalizer
+    from bagtools.localize.tracker import TRACKING
+    from bagtools.ndtodom import run_front_end
+    from bagtools.slam import SlamOptions, SlamPipeline
+    from bagtools.transforms import se2_between, se2_compose
+    from bagtools_simulate.pipeline import SimConfig, simulate_bag
+
+    duration = 60.0 if quick else 120.0
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory(prefix="bench_localize_") as tmp:
+        root = Path(tmp)
+        lap = simulate_bag(root / "lap", SimConfig(duration_s=duration, route="lap", seed=1, cloud=False)).path
+        bag = simulate_bag(root / "figure8", SimConfig(duration_s=duration, route="figure8", seed=5, cloud=False)).path
+        maps = {"ground-truth grid": write_nav2_map(GridMapPipeline(lap, GridMapOptions(
+                    poses="ground-truth", frame="map")).run().grid, root / "gt"),
+                "SLAM map": write_nav2_map(SlamPipeline(lap, SlamOptions()).run().grid, root / "slam")}
+        t0 = time.perf_counter()
+        front = run_front_end(bag)
+        odometry_x = duration / (time.perf_counter() - t0)
+        for name, map_yaml in maps.items():
+            summary = LocalizePipeline(bag, map_yaml).run().summary
+            where = f"{duration:.0f} s simulated figure eight in the {name} of a lap"
+            rows.append(Row("localize", f"tracking speed, {where}", summary["speed_x_real_time"], "x real time",
+                            "laser odometry (ndt-odom front end), same scans", odometry_x, True, ">= 50"))
+            ape = "ape_m" if name == "ground-truth grid" else "ape_aligned_m"
+            truth = summary["ground_truth"]
+            rows.append(Row("localize", f"APE ({ape}) rmse, {where}", truth["ours"][ape]["rmse"], "m",
+                            "the bag's AMCL-like localizer (map -> odom)", truth["bag_localizer"][ape]["rmse"], False,
+                            "<= 0.01 m"))
+        del front
+        inputs, odom, truth = _sequence(bag)
+        nav2 = read_nav2_map(maps["ground-truth grid"])
+        points = nav2.occupied_points()
+        n_starts = 20 if quick else 100
+        starts = np.random.default_rng(11).choice(len(odom) - 20, size=n_starts, replace=False)
+        fixed = first_right = 0
+        for start in starts:
+            localizer = MapLocalizer(points, nav2.resolution_m)
+            for step, k in enumerate(range(start, len(odom))):
+                state = localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
+                if step == 0 and localizer.hypotheses:
+                    first_right += bool(np.hypot(*(localizer.hypotheses[0].pose[:2] - truth[k, :2])) < 0.05)
+                if state == TRACKING:
+                    in_time = (inputs.stamps_ns[k] - inputs.stamps_ns[start]) * 1e-9 <= 2.0
+                    fixed += in_time and bool(np.hypot(*(localizer.poses[step][:2] - truth[k, :2])) < 0.05)
+                    break
+        rows.append(Row("localize", f"first fix within 2 s at the place (5 cm), {n_starts} random starts, no initial "
+                        "pose, ground-truth grid", fixed / n_starts, "share",
+                        "the start scan's best global-search place alone", first_right / n_starts, True, ">= 0.95"))
+        k0 = 120  # 24 s into the figure eight, 2.5 m from where it is 28 s later
+        far = np.hypot(*(truth[:, :2] - truth[k0, :2]).T)
+        j0 = int(np.flatnonzero((far > 2.4) & (np.arange(len(far)) > k0 + 20))[0])
+        localizer = MapLocalizer(points, nav2.resolution_m)
+        order = list(range(k0)) + list(range(j0, len(far)))
+        for step, k in enumerate(order):
+            o = odom[k] if k < k0 else se2_compose(odom[k0 - 1], se2_between(odom[j0], odom[k]))
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), o)
+        events = {e.kind: e.index for e in localizer.events}
+        if "recovered" in events:
+            recovery_s = (inputs.stamps_ns[order[events["recovered"]]] - inputs.stamps_ns[j0]) * 1e-9
+            fix_s = (inputs.stamps_ns[events["fix"]] - inputs.stamps_ns[0]) * 1e-9
+            rows.append(Row("localize", f"kidnap of {far[j0]:.1f} m mid-bag: seconds to the recovered fix", recovery_s,
+                            "s", "seconds to the first fix at the bag's start", fix_s, False, "<= 3 s"))
+    return rows
+
+
+def _global_rows(quick: bool) -> list[Row]:
     from bagtools.grid import read_nav2_map, write_nav2_map
     from bagtools.gridmap import GridMapOptions, GridMapPipeline
     from bagtools.io import open_bag

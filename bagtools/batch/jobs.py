@@ -214,6 +214,29 @@ def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutp
     return JobOutput(result.summary, [p.name for p in written])
 
 
+# -- localize -----------------------------------------------------------------
+
+
+def _localize_options(p: Mapping[str, Any]) -> WriterConfig:
+    from bagtools.grid import read_nav2_map
+    from bagtools.localize import LocalizeOptions
+
+    read_nav2_map(p["map_yaml"])  # a missing or bad map is one error before any work
+    return WriterConfig((str(p["map_yaml"]), LocalizeOptions(
+        topic=p["topic"], initial_pose=p["initial_pose"], use_odometry=not p["no_odometry"],
+        scan_frame_offset=p["scan_frame_offset"])), mcap=not p["no_mcap"])
+
+
+def _localize(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
+    from bagtools.localize import LOCALIZE_FILES, LocalizePipeline, write_localize
+
+    check_outputs(out_dir, LOCALIZE_FILES, force)
+    map_yaml, options = config.options
+    result = LocalizePipeline(bag, map_yaml, options, keep_scans=config.mcap).run()
+    written = write_localize(result, out_dir, force, mcap=config.mcap)
+    return JobOutput(result.summary, [p.name for p in written])
+
+
 _WARN = Column("warnings", ("warnings",), "int", "count")
 
 #: command name -> its job. A command is batchable when it is here and in ``bagtools.cli.COMMANDS``.
@@ -262,6 +285,16 @@ JOBS: dict[str, Job] = {
          Column("optimize_s", ("optimization", "time_s")), _WARN),
         plots=(("APE after alignment [m]", ("ape_slam_m", "ape_front_end_m")),
                ("loop closures", ("loops_accepted", "loops_rejected")))),
+    "localize": Job(
+        "localize", _localize_options, _localize,
+        (Column("scans", ("scans",), "int"), Column("scans_localized", ("scans_localized",), "int"),
+         Column("first_fix_s", ("first_fix", "seconds_after_first_scan")), Column("lost", ("lost",), "int"),
+         Column("recovered", ("recovered",), "int"), Column("score_mean", ("score", "mean")),
+         Column("vs_bag_localizer_m", ("bag_localizer", "translation_m", "mean")),
+         Column("ape_m", ("ground_truth", "ours", "ape_m", "rmse")),
+         Column("ape_bag_localizer_m", ("ground_truth", "bag_localizer", "ape_m", "rmse")), _WARN),
+        plots=(("scans", ("scans", "scans_localized")), ("lost and recovered", ("lost", "recovered")),
+               ("APE against the ground truth [m]", ("ape_m", "ape_bag_localizer_m")))),
 }
 
 

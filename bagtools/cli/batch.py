@@ -64,7 +64,7 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     """Run COMMAND on every bag of BAGS in parallel on Dask, one row per bag in DIR/fleet.csv.
 
     COMMAND is a bagtools command that reads one bag: info (writes
-    info.json), map-cloud, grid, ndt-odom or slam; its options follow '--'. BAGS are
+    info.json), map-cloud, grid, ndt-odom, slam or localize; its options follow '--'. BAGS are
     paths or globs; a folder is searched for rosbag2 directories and .mcap,
     .db3 and .bag files. Each bag's outputs go to DIR/<bag>/, exactly as the
     command writes its --out. A failed bag is a row with its error (exit
@@ -76,6 +76,7 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
       bagtools batch ndt-odom /data/2026-11-22/ --out fleet/ndt
       bagtools batch grid 'runs/*/robot*' --out fleet/grid --workers 4 -- --resolution 10
       bagtools batch info /nfs/bags --out /nfs/fleet/info --scheduler tcp://head:8786
+      bagtools batch localize 'runs/*.mcap' --out fleet/localize -- --map building/map.yaml
     """
     from bagtools.batch import FAILED, SKIPPED, BatchRun, ClusterSpec, plan_batch, write_fleet
     from bagtools.cli import COMMANDS, Terminated

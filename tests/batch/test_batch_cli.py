@@ -47,12 +47,12 @@ def test_a_command_batch_cannot_run_is_the_command_lines_fault_not_the_bags(flee
                                                                             capsys) -> None:
     code, _, err = _batch(["export", str(fleet.good[0]), "--out", str(tmp_path / "out"), "--", "/scan"], capsys)
     assert code == 2 and err.strip() == ("bagtools: invalid value for COMMAND: 'export' is not a command batch can "
-                                         "run (choose from grid, info, map-cloud, ndt-odom, slam) (see 'bagtools "
+                                         "run (choose from grid, info, localize, map-cloud, ndt-odom, slam) (see 'bagtools "
                                          "batch --help')"), err
 
 
 @pytest.mark.parametrize("args, problem", [
-    (["tf", "{bag}"], "'tf' is not a command batch can run (choose from grid, info, map-cloud, ndt-odom, slam)"),
+    (["tf", "{bag}"], "'tf' is not a command batch can run (choose from grid, info, localize, map-cloud, ndt-odom, slam)"),
     (["grid", "{bag}", "--", "--resolution", "abc"], "'abc' is not a valid float (see 'bagtools grid --help')"),
     (["grid", "{bag}", "--", "--resolution", "0"], "--resolution must be between 0.1 and 1000"),
     (["ndt-odom", "{bag}", "--", "--init", "guess"], "invalid value for '--init'"),

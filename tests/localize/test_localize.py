@@ -1,0 +1,202 @@
+"""``bagtools localize``: a simulated bag localized in the map of another route, from no initial pose; lost and
+recovered after a kidnap; a map that repeats itself; the command's files and its refusals."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagtools.cli import main
+from bagtools.grid import read_nav2_map, write_nav2_map
+from bagtools.gridmap import GridMapOptions, GridMapPipeline
+from bagtools.io import open_bag
+from bagtools.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
+from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING
+from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
+from bagtools.simtruth import read_ground_truth
+from bagtools.transforms import se2_between, se2_compose, tform2pose
+from bagtools_simulate.pipeline import SimConfig, simulate_bag
+from tests.localize.test_global_search import _room_scan
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory) -> dict[str, Path]:
+    """A 60 s lap mapped from its ground truth (the map), and a 60 s figure eight of another seed (the bag)."""
+    root = tmp_path_factory.mktemp("localize")
+    lap = simulate_bag(root / "lap", SimConfig(duration_s=60.0, route="lap", seed=1, cloud=False)).path
+    figure8 = simulate_bag(root / "figure8", SimConfig(duration_s=60.0, route="figure8", seed=5, cloud=False)).path
+    grid = GridMapPipeline(lap, GridMapOptions(poses="ground-truth", frame="map")).run().grid
+    return {"map": write_nav2_map(grid, root / "map"), "bag": figure8, "root": root}
+
+
+def _sequence(bag: Path) -> tuple:
+    """The bag's scans as the localizer takes them (base frame, recording order), odometry poses and truth."""
+    dataset = NdtOdomPipeline(bag, NdtOdomOptions())
+    with open_bag(bag) as reader:
+        inputs = dataset.read_inputs(reader)
+        stamps, T, _ = read_ground_truth(reader)
+    truth = tform2pose(T)[np.searchsorted(stamps, inputs.stamps_ns).clip(0, len(stamps) - 1)]
+    return inputs, tform2pose(inputs.odometry[0]), truth
+
+
+@pytest.mark.parametrize("odometry", [True, False])
+def test_a_bag_is_localized_in_the_map_of_another_route(world: dict, odometry: bool) -> None:
+    result = LocalizePipeline(world["bag"], world["map"], LocalizeOptions(use_odometry=odometry)).run()
+    s = result.summary
+    assert s["first_fix"]["seconds_after_first_scan"] <= 2.0
+    assert s["scans_localized"] == s["scans"] and s["lost"] == 0
+    ours = s["ground_truth"]["ours"]["ape_m"]
+    assert ours["rmse"] < 0.02 and ours["max"] < 0.05, ours  # the map's 5 cm cells bound it (bench: 1.3 cm)
+    theirs = s["ground_truth"]["bag_localizer"]["ape_m"]
+    assert ours["rmse"] < theirs["rmse"]  # the simulator's AMCL-like localizer: about 4 cm
+    compared = s["bag_localizer"]
+    assert compared["scans_compared"] > 250 and compared["parts"] == []
+    assert (result.map_to_odom is not None) == odometry
+    assert s["speed_x_real_time"] > 10  # the bench row holds the speed target; this only catches a stall
+
+
+def test_the_first_fix_comes_within_two_seconds_from_random_starts(world: dict) -> None:
+    """Ten starts along the figure eight, no initial pose (the bench row runs a hundred)."""
+    inputs, odom, truth = _sequence(world["bag"])
+    nav2 = read_nav2_map(world["map"])
+    starts = np.random.default_rng(7).choice(len(odom) - 20, size=10, replace=False)
+    fixed = 0
+    for start in starts:
+        localizer = MapLocalizer(nav2.occupied_points(), nav2.resolution_m)
+        for step, k in enumerate(range(start, start + 11)):  # 2 s of scans at 5 Hz
+            if localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k]) == TRACKING:
+                pose = localizer.poses[step]
+                fixed += bool(np.hypot(*(pose[:2] - truth[k, :2])) < 0.05)
+                break
+    assert fixed >= 9, fixed
+
+
+def test_a_kidnapped_robot_is_lost_and_recovered_within_three_seconds(world: dict) -> None:
+    """Carried 2.5 m mid-bag: from scan 120 on the scans are those of a place 2.5 m away (the wheels saw
+    nothing: the odometry continues from where it was)."""
+    inputs, odom, truth = _sequence(world["bag"])
+    nav2 = read_nav2_map(world["map"])
+    k0 = 120
+    far = np.hypot(*(truth[:, :2] - truth[k0, :2]).T)
+    j0 = int(np.flatnonzero((far > 2.4) & (np.arange(len(far)) > k0 + 20))[0])
+    localizer = MapLocalizer(nav2.occupied_points(), nav2.resolution_m)
+    order = list(range(k0)) + list(range(j0, len(far)))
+    for step, k in enumerate(order):
+        o = odom[k] if k < k0 else se2_compose(odom[k0 - 1], se2_between(odom[j0], odom[k]))
+        localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), o)
+    kinds = [(e.kind, e.index) for e in localizer.events]
+    assert [k for k, _ in kinds] == ["fix", "lost", "recovered"], kinds
+    lost, recovered = kinds[1][1], kinds[2][1]
+    assert k0 <= lost and (inputs.stamps_ns[order[recovered]] - inputs.stamps_ns[j0]) * 1e-9 <= 3.0
+    errors = [np.hypot(*(localizer.poses[s][:2] - truth[k][:2])) for s, k in enumerate(order) if s in localizer.poses]
+    assert max(errors) < 0.05  # the scans between the kidnap and its detection are not kept
+
+
+def test_a_map_that_repeats_itself_stays_ambiguous_until_the_scans_tell_the_places_apart() -> None:
+    """A bare 10 m x 6 m room is the same turned by 180 degrees: no fix, however long the robot drives."""
+    half = (5.0, 3.0)
+    x = np.arange(-half[0], half[0] + 1e-9, 0.05)
+    y = np.arange(-half[1], half[1] + 1e-9, 0.05)
+    walls = np.r_[np.c_[x, np.full_like(x, half[1])], np.c_[x, np.full_like(x, -half[1])],
+                  np.c_[np.full_like(y, half[0]), y], np.c_[np.full_like(y, -half[0]), y]]
+    localizer = MapLocalizer(walls, 0.05)
+    states = []
+    for k in range(15):
+        pose = np.array([1.0 + 0.1 * k, 0.5, 0.3])
+        states.append(localizer.step(k, k * 200_000_000, _room_scan(pose, half), pose))
+    assert localizer.committed is None and states[-1] == AMBIGUOUS and CONFIRMING in states
+    assert len(localizer.hypotheses) == 2
+
+
+def test_the_command_writes_its_files_and_refuses_to_overwrite(world: dict, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "loc"
+    argv = ["localize", str(world["bag"]), "--map", str(world["map"]), "--out", str(out)]
+    with pytest.raises(SystemExit) as done:
+        main(argv)
+    assert done.value.code == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"trajectory.tum", "map_to_odom.tum", "bag_localizer.tum", "ground_truth.tum", "localization.png",
+            "localizer_comparison.png", "summary.json", "results.mcap"} <= names
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["per_scan"]["score"]) == summary["scans"] == len(summary["per_scan"]["state"])
+    assert (out / "localization.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open_bag(out / "results.mcap") as bag:
+        assert {"/map", "/trajectory", "/tf", "/scan", "/bag_localizer"} <= set(bag.topics)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as again:
+        main(argv)
+    err = capsys.readouterr().err
+    assert again.value.code == 2 and "already exists" in err and "Traceback" not in err
+
+
+def _bare_room_map(directory: Path) -> Path:
+    directory.mkdir()
+    image = np.full((120, 200), 254, dtype=np.uint8)
+    image[0, :] = image[-1, :] = image[:, 0] = image[:, -1] = 0
+    image[40:80, 90:92] = 0
+    (directory / "room.pgm").write_bytes(b"P5\n200 120\n255\n" + image.tobytes())
+    (directory / "room.yaml").write_text("image: room.pgm\nresolution: 0.05\norigin: [-5.0, -3.0, 0.0]\nnegate: 0\n"
+                                         "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    return directory / "room.yaml"
+
+
+@pytest.mark.parametrize("case", ["another place", "not a map", "no scans", "bad initial pose", "empty map"])
+def test_bad_input_is_one_line_and_exit_2(world: dict, tmp_path: Path, capsys, case: str) -> None:
+    bag, map_yaml, extra = str(world["bag"]), str(world["map"]), []
+    if case == "another place":
+        map_yaml = str(_bare_room_map(tmp_path / "room"))
+    elif case == "not a map":
+        map_yaml = str(world["bag"] / "metadata.yaml")
+    elif case == "no scans":
+        extra = ["--topic", "/odom"]
+    elif case == "bad initial pose":
+        extra = ["--initial-pose", "1,2"]
+    else:
+        (tmp_path / "e.pgm").write_bytes(b"P5\n4 3\n255\n" + bytes([254] * 12))
+        (tmp_path / "e.yaml").write_text("image: e.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                                         "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+        map_yaml = str(tmp_path / "e.yaml")
+    with pytest.raises(SystemExit) as done:
+        main(["localize", bag, "--map", map_yaml, "--out", str(tmp_path / "out"), *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert done.value.code == 2 and len(err) == 1 and err[0].startswith("bagtools: "), err
+    assert not (tmp_path / "out").exists()
+    expected = {"another place": "could be placed in the map", "not a map": "not 'key: value'",
+                "no scans": "expected sensor_msgs/msg/LaserScan", "bad initial pose": "X,Y,YAW",
+                "empty map": "at least 5 occupied places"}[case]
+    assert expected in err[0]
+
+
+def test_an_initial_pose_skips_the_global_search(world: dict) -> None:
+    inputs, _, truth = _sequence(world["bag"])
+    start = truth[inputs.order[0]]
+    guess = (float(start[0]) + 0.3, float(start[1]) - 0.2, float(start[2]) + 0.2)
+    result = LocalizePipeline(world["bag"], world["map"], LocalizeOptions(initial_pose=guess)).run()
+    assert result.summary["global_searches"] == 0 and result.summary["scans_localized"] == result.summary["scans"]
+    assert result.summary["ground_truth"]["ours"]["ape_m"]["rmse"] < 0.02
+    assert math.isclose(result.summary["first_fix"]["seconds_after_first_scan"], 0.8, abs_tol=0.25)
+
+
+def test_a_fleet_is_localized_in_one_map(world: dict, tmp_path: Path, capsys) -> None:
+    """``bagtools batch localize BAGS -- --map map.yaml``: a row per bag; a bad map is one error before any work."""
+    bags = tmp_path / "bags"
+    bags.mkdir()
+    (bags / "figure8").symlink_to(world["bag"])
+    with pytest.raises(SystemExit) as done:
+        main(["batch", "localize", str(bags), "--out", str(tmp_path / "fleet"), "--workers", "1", "--",
+              "--map", str(world["map"]), "--no-mcap"])
+    assert done.value.code == 0, capsys.readouterr().err
+    rows = (tmp_path / "fleet" / "fleet.csv").read_text().splitlines()
+    header, row = rows[0].split(","), dict(zip(rows[0].split(","), rows[1].split(",")))
+    assert "scans_localized" in header and row["status"] == "ok" and row["scans_localized"] == row["scans"]
+    assert float(row["ape_m"]) < 0.02 and (tmp_path / "fleet" / "figure8" / "trajectory.tum").is_file()
+    with pytest.raises(SystemExit) as bad:
+        main(["batch", "localize", str(bags), "--out", str(tmp_path / "fleet2"), "--", "--map",
+              str(tmp_path / "nowhere.yaml")])
+    err = capsys.readouterr().err
+    assert bad.value.code == 2 and "Traceback" not in err
+    assert err.strip().splitlines()[-1].startswith("bagtools: ") and "nowhere.yaml: map YAML not found" in err
