@@ -143,7 +143,8 @@ class LocalizePipeline:
         points = nav2_map.occupied_points()
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,
-                                     None if self.options.initial_pose is None else np.array(self.options.initial_pose))
+                                     None if self.options.initial_pose is None else np.array(self.options.initial_pose),
+                                     sensor_xy=tuple(inputs.T_base_scan[:2, 3]))
         except ValueError as err:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
         odom = None

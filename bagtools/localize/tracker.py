@@ -10,8 +10,11 @@ or more hypotheses of the base's pose in the map:
 - **confirming**: every hypothesis follows the robot (each scan tracked against
   the map, below); one that stops matching is dropped. The best is committed
   once it has matched ``CONFIRM_SCANS`` scans and beats every other by
-  ``CONFIRM_MARGIN`` in mean score over them (and scores ``FIX_SCORE``): the
-  first fix. Hypotheses the scans do not tell apart by then are *ambiguous*,
+  ``CONFIRM_MARGIN`` in mean evidence over them (and scores ``FIX_SCORE``): the
+  first fix. A hypothesis' evidence for a scan is its score times the share of
+  the scan's beams that do not pass through the map's walls on their way to
+  their return: in a room that looks alike turned around, the look-alike place
+  puts some walls where the robot saw through. Hypotheses the scans do not tell apart by then are *ambiguous*,
   and a map that repeats itself stays so until the robot sees what tells the
   places apart. The committed hypothesis' earlier poses
   are kept: the trajectory covers the scans since its search.
@@ -38,6 +41,7 @@ import numpy as np
 
 from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
 from bagtools.ndt import NdtReference, match_scans, match_scans_grid
+from bagtools.ndt.correlative import RASTER_MAX
 from bagtools.ndtodom.frontend import (
     CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
     PRIOR_WEIGHT_DEFAULT,
@@ -68,6 +72,10 @@ NDT_JUMP = (0.25, 0.15)
 SWITCH_MARGIN = 0.1
 #: NDT's result is taken unless it scores this much under its start (it diverged).
 DIVERGED_SCORE = 0.05
+#: A beam passes through a wall when an occupied cell lies on it short of this distance (m) before its return.
+THROUGH_TOLERANCE_M = 0.15
+#: Beams tested for passing through walls at most this many per scan (spread over the scan), each up to this range (m).
+THROUGH_BEAMS, THROUGH_RANGE_M = 120, 10.0
 #: Cell of the map's normal distributions (m).
 NDT_CELL_M = 0.5
 #: Hypotheses at most this many; a search that finds none is repeated this many scans later.
@@ -85,6 +93,7 @@ class _Hypothesis:
     since: int  # the scan it was born at
     poses: dict[int, np.ndarray] = field(default_factory=dict)
     scores: list[float] = field(default_factory=list)
+    evidence: list[float] = field(default_factory=list)  # score x share of beams not through walls, per scan
     misses: int = 0
     velocity: np.ndarray | None = None  # the last step's motion per second (base frame), without odometry
     stamp_ns: int = 0
@@ -110,12 +119,15 @@ class MapLocalizer:
         resolution_m: the map's cell (the rasters' and the refinement's).
         initial_pose: [x, y, theta] of the base at the first scan, when known (then no global search at the
             start: the first scan is searched within WINDOW of it).
+        sensor_xy: where the laser sits on the base (m): the beams' origin.
     """
 
     def __init__(self, map_points: np.ndarray, resolution_m: float = 0.05,
-                 initial_pose: np.ndarray | None = None) -> None:
+                 initial_pose: np.ndarray | None = None, sensor_xy: tuple[float, float] = (0.0, 0.0)) -> None:
         self.search = GlobalLocalizer(map_points, fine_m=resolution_m)
         self.fine = self.search.fine
+        self.occupied = self.fine.raster == RASTER_MAX  # the cells that hold a map point
+        self.sensor_xy = np.asarray(sensor_xy, dtype=np.float64)
         self.ndt = NdtReference.from_points(map_points, cell_size=NDT_CELL_M, cell_model="widened")
         self.hypotheses: list[_Hypothesis] = []
         self.committed: _Hypothesis | None = None
@@ -205,6 +217,7 @@ class MapLocalizer:
                 h = _Hypothesis(pose, index, stamp_ns=stamp_ns)
                 h.poses[index] = pose.copy()
                 h.scores.append(score)
+                h.evidence.append(score * (1.0 - self.through_walls(points, pose)))
                 self.hypotheses.append(h)
         if self._continued is not None:  # the lost pose, moved by the motion since, competes with the places
             lost, self._continued = self._continued, None
@@ -216,7 +229,7 @@ class MapLocalizer:
 
     def _decide(self, index: int, stamp_ns: int) -> bool:
         """Commit the best hypothesis if it has held long enough and stands out (see the module docstring)."""
-        means = [float(np.mean(h.scores[-CONFIRM_SCANS:])) for h in self.hypotheses]
+        means = [float(np.mean(h.evidence[-CONFIRM_SCANS:])) for h in self.hypotheses]
         order = np.argsort(means)[::-1]
         best = self.hypotheses[order[0]]
         rivals = [self.hypotheses[i] for i in order[1:] if means[order[0]] - means[i] < CONFIRM_MARGIN]
@@ -236,7 +249,7 @@ class MapLocalizer:
     def _distinct(self, hypotheses: list[_Hypothesis]) -> list[_Hypothesis]:
         """Hypotheses that came to the same place are one (the better scoring one)."""
         kept: list[_Hypothesis] = []
-        for h in sorted(hypotheses, key=lambda h: -float(np.mean(h.scores[-CONFIRM_SCANS:]))):
+        for h in sorted(hypotheses, key=lambda h: -float(np.mean(h.evidence[-CONFIRM_SCANS:]))):
             if all(not _near(h.pose, k.pose, SEPARATION) for k in kept):
                 kept.append(h)
         return kept
@@ -267,6 +280,8 @@ class MapLocalizer:
             h.velocity = None
         h.poses[index] = h.pose.copy()
         h.scores.append(score)
+        if self.committed is not h:  # only while places compete
+            h.evidence.append(score * (1.0 - self.through_walls(points, h.pose)))
         h.stamp_ns = stamp_ns
         return score
 
@@ -296,6 +311,34 @@ class MapLocalizer:
         refined = np.asarray(result.pose, dtype=np.float64)
         score, before = self.fine.score(points, refined), self.fine.score(points, start)
         return (refined, score) if score >= before - DIVERGED_SCORE else (start, before)
+
+    def through_walls(self, points: np.ndarray, pose: np.ndarray) -> float:
+        """The share of the scan's beams (``points`` (M, 2) their returns in the base frame, from ``sensor_xy``)
+        that pass through an occupied cell of the map on their way, THROUGH_TOLERANCE_M short of their return,
+        at base pose ``pose``; 0.0 for no beam. Up to THROUGH_BEAMS beams, each tested up to THROUGH_RANGE_M."""
+        pts = np.asarray(points, dtype=np.float64)
+        if len(pts) == 0:
+            return 0.0
+        pts = pts[np.linspace(0, len(pts) - 1, min(len(pts), THROUGH_BEAMS)).astype(np.intp)]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        R = np.array([[c, -s], [s, c]])
+        origin = R @ self.sensor_xy + pose[:2]
+        ends = pts @ R.T + pose[:2]
+        along = ends - origin
+        length = np.hypot(along[:, 0], along[:, 1])
+        reach = np.minimum(length - THROUGH_TOLERANCE_M, THROUGH_RANGE_M)
+        step = 0.5 * self.fine.resolution_m
+        t = np.arange(step, max(float(reach.max()), step) + 1e-9, step)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = along / length[:, None]
+        samples = origin + t[None, :, None] * unit[:, None, :]  # (beams, samples, 2)
+        cells = np.floor((samples - self.fine.origin) / self.fine.resolution_m).astype(np.intp)
+        nx, ny = self.occupied.shape
+        inside = (cells[..., 0] >= 0) & (cells[..., 0] < nx) & (cells[..., 1] >= 0) & (cells[..., 1] < ny)
+        hit = np.zeros(inside.shape, dtype=bool)
+        hit[inside] = self.occupied[cells[inside][:, 0], cells[inside][:, 1]]
+        hit &= t[None, :] <= reach[:, None]
+        return float(np.count_nonzero(hit.any(axis=1))) / len(pts)
 
     def _poor(self) -> float:
         """Scores under this are poor matches: LOST_RATIO of the typical score, and never under MIN_SCORE."""

@@ -59,20 +59,27 @@ def test_a_bag_is_localized_in_the_map_of_another_route(world: dict, odometry: b
     assert s["speed_x_real_time"] > 10  # the bench row holds the speed target; this only catches a stall
 
 
-def test_the_first_fix_comes_within_two_seconds_from_random_starts(world: dict) -> None:
-    """Ten starts along the figure eight, no initial pose (the bench row runs a hundred)."""
+def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wrong(world: dict) -> None:
+    """Twenty starts along the figure eight, no initial pose (the bench row runs a hundred). The TurtleBot3 world
+    looks the same turned by 180 degrees from many places (the top and bottom walls): there the scans cannot tell
+    the two places apart until the robot sees the sides, and the localizer must say so rather than guess."""
     inputs, odom, truth = _sequence(world["bag"])
     nav2 = read_nav2_map(world["map"])
-    starts = np.random.default_rng(7).choice(len(odom) - 20, size=10, replace=False)
-    fixed = 0
+    starts = np.random.default_rng(7).choice(len(odom) - 20, size=20, replace=False)
+    fixed = alike = 0
     for start in starts:
         localizer = MapLocalizer(nav2.occupied_points(), nav2.resolution_m)
-        for step, k in enumerate(range(start, start + 11)):  # 2 s of scans at 5 Hz
-            if localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k]) == TRACKING:
-                pose = localizer.poses[step]
-                fixed += bool(np.hypot(*(pose[:2] - truth[k, :2])) < 0.05)
+        for step, k in enumerate(range(start, len(odom))):
+            state = localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
+            in_time = (inputs.stamps_ns[k] - inputs.stamps_ns[start]) * 1e-9 <= 2.0
+            if state == TRACKING:
+                assert np.hypot(*(localizer.poses[step][:2] - truth[k, :2])) < 0.05, (start, step)  # never wrong
+                fixed += in_time
                 break
-    assert fixed >= 9, fixed
+            if in_time and (inputs.stamps_ns[k + 1] - inputs.stamps_ns[start]) * 1e-9 > 2.0:
+                alike += state == AMBIGUOUS and any(np.hypot(*(h.pose[:2] - truth[k, :2])) < 0.05
+                                                    for h in localizer.hypotheses)
+    assert fixed + alike == len(starts) and fixed >= 10, (fixed, alike)
 
 
 def test_a_kidnapped_robot_is_lost_and_recovered_within_three_seconds(world: dict) -> None:
