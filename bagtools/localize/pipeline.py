@@ -2,7 +2,8 @@
 
     LocalizePipeline(bag, options).run()
         _read()           the map; the scans, their order and odometry, as ndt-odom reads them
-        _localize()       every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track
+        _localize()       the laser odometry (ndt-odom's front end, with the wheels when used) as the motion,
+                          every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track
         _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
         _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
         _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
@@ -29,7 +30,7 @@ from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.slam.evaluate import ape_aligned
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation
-from bagtools.transforms import pose2tform, se2_between, tform2pose
+from bagtools.transforms import pose2tform, se2_between, tform2pose, wrap_to_pi
 
 MAP_FRAME = "map"
 #: Where our poses and the bag's own localizer part by more than this (m, deg), the comparison says so.
@@ -96,7 +97,7 @@ class LocalizePipeline:
         nav2_map = read_nav2_map(self.map_yaml)
         with open_bag(self.bag_path) as bag:
             dataset, inputs = self._read(bag)
-            localizer, elapsed_s = self._localize(nav2_map, inputs)
+            localizer, elapsed_s = self._localize(nav2_map, dataset, inputs)
             own = self._bag_localizer(dataset, inputs)
             truth = self._ground_truth(bag, dataset)
         self.warnings = list(dict.fromkeys(dataset.warnings + self.warnings))
@@ -138,8 +139,11 @@ class LocalizePipeline:
             raise BagtoolsError(dataset.no_scan_problem(), self.bag_path)
         return dataset, inputs
 
-    def _localize(self, nav2_map: Nav2Map, inputs: ScanInputs) -> tuple[MapLocalizer, float]:
-        """Every scan, in recording order, through the localizer; returns it and the seconds it took."""
+    def _localize(self, nav2_map: Nav2Map, dataset: NdtOdomPipeline,
+                  inputs: ScanInputs) -> tuple[MapLocalizer, float]:
+        """Every scan, in recording order, through the localizer, its motion prior the laser odometry (ndt-odom's
+        front end: the scans matched to each other, with the wheel odometry when the bag has it and used);
+        returns the localizer and the seconds both took."""
         points = nav2_map.occupied_points()
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,
@@ -147,13 +151,11 @@ class LocalizePipeline:
                                      sensor_xy=tuple(inputs.T_base_scan[:2, 3]))
         except ValueError as err:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
-        odom = None
-        if inputs.odometry is not None:
-            odom = np.where(inputs.odometry[1][:, None], tform2pose(inputs.odometry[0]), np.nan)
         t0 = time.perf_counter()
+        front, odom = dataset.register(inputs)
+        self.warnings.extend(front.warnings(self.options.topic))
         for step, k in enumerate(progress(inputs.order, total=len(inputs.order), desc="localizing", unit="scan")):
-            pose = None if odom is None or not np.isfinite(odom[k]).all() else odom[k]
-            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), pose)
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
         return localizer, time.perf_counter() - t0
 
     def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
@@ -191,14 +193,15 @@ class LocalizePipeline:
             "base_frame": result.base_frame,
             "scans": len(stamps),
             "scans_localized": int(np.isfinite(result.poses).all(axis=1).sum()),
-            "states": counts,
+            "scans_by_state": counts,  # "lost" and "recovered" below count episodes
             "first_fix": None if not fixes else {
                 "scan": fixes[0].index, "stamp_ns": fixes[0].stamp_ns,
                 "seconds_after_first_scan": (fixes[0].stamp_ns - int(stamps[0])) * 1e-9},
             "lost": sum(e.kind == "lost" for e in result.events),
             "recovered": sum(e.kind == "recovered" for e in result.events),
             "events": [{"kind": e.kind, "scan": e.index, "stamp_ns": e.stamp_ns,
-                        "pose_xy_yaw": [float(v) for v in e.pose]} for e in result.events],
+                        "pose_xy_yaw": [float(e.pose[0]), float(e.pose[1]), float(wrap_to_pi(e.pose[2]))]}
+                       for e in result.events],
             "global_searches": localizer.searches,
             "odometry_used": result.map_to_odom is not None,
             "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
@@ -213,9 +216,10 @@ class LocalizePipeline:
             self.warnings.append(f"{counts[AMBIGUOUS]} scan(s) matched several places of the map alike for longer "
                                  f"than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats itself)")
         if summary["lost"]:
-            places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})"
-                               for e in result.events if e.kind == "lost")
-            self.warnings.append(f"lost {summary['lost']} time(s), recovered {summary['recovered']}: {places}")
+            losses = [e for e in result.events if e.kind == "lost"]
+            places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})" for e in losses[:3])
+            more = f" and {len(losses) - 3} more (summary.json: events)" if len(losses) > 3 else ""
+            self.warnings.append(f"lost {summary['lost']} time(s), recovered {summary['recovered']}: {places}{more}")
         if result.bag_localizer is not None:
             summary["bag_localizer"] = self._compare(result.trajectory, result.bag_localizer)
         if result.ground_truth is not None:

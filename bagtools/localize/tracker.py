@@ -19,13 +19,19 @@ or more hypotheses of the base's pose in the map:
   places apart. The committed hypothesis' earlier poses
   are kept: the trajectory covers the scans since its search.
 - **tracking**: each scan matched against the map (not against the previous
-  scan), from the previous pose moved by the odometry step (or, without
-  odometry, by the last step's velocity): NDT on the map's normal distributions,
-  and a correlative window search first when the motion is unknown or NDT's
-  result is poor or far from the prior. A scan scoring under ``LOST_RATIO`` of
-  the typical score ``LOST_SCANS`` times in a row means the robot is lost
-  (kidnapped, or the map no longer fits): it is counted, said, and searched for
-  again.
+  scan), from the last good pose moved by the odometry since (or, without
+  odometry, by the velocity of the last half second of good matches): NDT on
+  the map's normal distributions held by that prior, a correlative window
+  search when NDT's result is poor or far from the prior, and a wide local
+  search (a fast turn, an odometry glitch) when that is poor too. A scan scoring
+  under ``LOST_RATIO`` of the typical score after all that, ``LOST_SCANS`` times
+  in a row, means the robot is lost (kidnapped, or the map no longer fits): it
+  is counted, said, and searched for again, where it was (moved by the motion
+  since, in a wide window) competing with the global search's places; a place
+  found after a loss must score ``RECOVER_RATIO`` of the typical score before it.
+  The map's answer corrects the motion's prediction by ``MAP_GAIN`` per scan (a
+  fixed-gain filter): each scan's matching noise is smoothed away, a drift is
+  corrected within a few seconds.
 
 Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base +
 [x, y]``); scores are :meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
@@ -44,7 +50,7 @@ from bagtools.ndt import NdtReference, match_scans, match_scans_grid
 from bagtools.ndt.correlative import RASTER_MAX
 from bagtools.ndtodom.frontend import (
     CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
-    PRIOR_WEIGHT_DEFAULT,
+    PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S,
 )
 from bagtools.transforms import se2_between, se2_compose
 
@@ -64,8 +70,14 @@ LOST_SCANS = 3
 MIN_SCORE = 0.15
 #: Scores kept for the typical score.
 TYPICAL_SCANS = 50
-#: The window searched around the prior when the motion is unknown or NDT's result is poor (m, m, rad).
+#: The window searched around the prior when the motion is unknown or NDT's result is poor (m, m, rad), and
+#: the wide local window searched when that fails too (a fast turn, an odometry glitch) before a scan is a miss.
 WINDOW = (0.5, 0.5, 0.4)
+LOCAL_WINDOW = (2.0, 2.0, math.pi / 2)
+#: The share of the map's correction of the motion's prediction taken at each scan (1: the map's answer alone).
+MAP_GAIN = 0.1
+#: A place found after a loss is committed only when it scores this share of the typical score before the loss.
+RECOVER_RATIO = 0.8
 #: NDT's result is not trusted when it moves this far from its prior (m, rad).
 NDT_JUMP = (0.25, 0.15)
 #: The window search overrules the motion only when it scores this much more than NDT held by the motion.
@@ -95,7 +107,8 @@ class _Hypothesis:
     scores: list[float] = field(default_factory=list)
     evidence: list[float] = field(default_factory=list)  # score x share of beams not through walls, per scan
     misses: int = 0
-    velocity: np.ndarray | None = None  # the last step's motion per second (base frame), without odometry
+    anchor: tuple[np.ndarray, np.ndarray] | None = None  # (map pose, odometry pose) at its last good match
+    recent: deque = field(default_factory=lambda: deque(maxlen=50))  # (stamp_ns, map pose) of its good matches
     stamp_ns: int = 0
     continued: bool = False  # where the robot was before it was lost, moved by the motion since
 
@@ -141,8 +154,7 @@ class MapLocalizer:
         self._initial = None if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
         self._lost_since: int | None = None
         self._continued: _Hypothesis | None = None
-        self._last_odom: np.ndarray | None = None
-        self._last_stamp: int | None = None
+        self._typical_before_loss = 0.0
 
     # -- one scan -------------------------------------------------------------------------------
 
@@ -151,22 +163,17 @@ class MapLocalizer:
         [x, y, theta] or None); returns its state: 'searching' (no place matches yet), 'confirming' (places
         followed for fewer than CONFIRM_SCANS scans), 'ambiguous' (places the scans do not tell apart yet),
         'tracking' or 'lost'."""
-        motion = None
-        if odom is not None and self._last_odom is not None:
-            motion = se2_between(self._last_odom, odom)
-        dt = 0.0 if self._last_stamp is None else max(0.0, (stamp_ns - self._last_stamp) * 1e-9)
-        self._last_odom, self._last_stamp = odom, stamp_ns
+        odom = None if odom is None else np.asarray(odom, dtype=np.float64)
         if self.committed is not None:
-            state = self._track_committed(index, stamp_ns, points, motion, dt)
+            state = self._track_committed(index, stamp_ns, points, odom)
         else:
-            state = self._confirm(index, stamp_ns, points, motion, dt)
+            state = self._confirm(index, stamp_ns, points, odom)
         self.states.append(state)
         return state
 
-    def _track_committed(self, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None,
-                         dt: float) -> str:
+    def _track_committed(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> str:
         h = self.committed
-        score = self._follow(h, index, stamp_ns, points, motion, dt)
+        score = self._follow(h, index, stamp_ns, points, odom)
         if h.misses < LOST_SCANS:
             self.poses[index], self.scores[index] = h.pose.copy(), score
             if h.misses == 0:
@@ -178,6 +185,7 @@ class MapLocalizer:
             self.poses.pop(k, None)
         self.committed, self.hypotheses = None, []
         self._continued = h  # searched again with the global search's places: the robot may not have moved
+        self._typical_before_loss = self._typical()
         self._lost_since = index
         self._next_search = index + 1
         return LOST
@@ -185,17 +193,17 @@ class MapLocalizer:
     def _recent_misses(self, h: _Hypothesis, index: int) -> set[int]:
         return set(range(index - h.misses + 1, index + 1))
 
-    def _confirm(self, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None, dt: float) -> str:
+    def _confirm(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> str:
         if not self.hypotheses:
             if index < self._next_search:
                 return LOST if self._lost_since is not None else SEARCHING
-            self._start(index, stamp_ns, points)
+            self._start(index, stamp_ns, points, odom)
             if not self.hypotheses:
                 self._next_search = index + SEARCH_EVERY_SCANS
                 return LOST if self._lost_since is not None else SEARCHING
         else:
             for h in self.hypotheses:
-                self._follow(h, index, stamp_ns, points, motion, dt)
+                self._follow(h, index, stamp_ns, points, odom)
             self.hypotheses = self._distinct([h for h in self.hypotheses if h.misses < LOST_SCANS])
         if self.hypotheses and self._decide(index, stamp_ns):
             return TRACKING
@@ -203,7 +211,7 @@ class MapLocalizer:
             return AMBIGUOUS if max(len(h.scores) for h in self.hypotheses) >= CONFIRM_SCANS else CONFIRMING
         return LOST if self._lost_since is not None else SEARCHING
 
-    def _start(self, index: int, stamp_ns: int, points: np.ndarray) -> None:
+    def _start(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> None:
         """New hypotheses for scan ``index``: the initial pose's window, or the global search."""
         if self._initial is not None and not self.events:
             found = match_scans_grid(points, self.fine, initial_pose=self._initial, search_range=(1.0, 1.0, 0.5))
@@ -218,12 +226,14 @@ class MapLocalizer:
                 h.poses[index] = pose.copy()
                 h.scores.append(score)
                 h.evidence.append(score * (1.0 - self.through_walls(points, pose)))
+                h.anchor = None if odom is None else (pose.copy(), odom.copy())
+                h.recent.append((stamp_ns, pose.copy()))
                 self.hypotheses.append(h)
         if self._continued is not None:  # the lost pose, moved by the motion since, competes with the places
             lost, self._continued = self._continued, None
-            h = _Hypothesis(lost.pose.copy(), index, stamp_ns=stamp_ns, continued=True)
-            h.velocity = lost.velocity
-            self._follow(h, index, stamp_ns, points, None, 0.0)
+            h = _Hypothesis(lost.pose.copy(), index, stamp_ns=stamp_ns, continued=True, anchor=lost.anchor,
+                            recent=lost.recent)
+            self._follow(h, index, stamp_ns, points, odom, wide=True)
             if h.misses == 0:
                 self.hypotheses = [h] + [o for o in self.hypotheses if not _near(o.pose, h.pose, SEPARATION)]
 
@@ -235,7 +245,8 @@ class MapLocalizer:
         rivals = [self.hypotheses[i] for i in order[1:] if means[order[0]] - means[i] < CONFIRM_MARGIN]
         if rivals and any(h.continued for h in [best, *rivals]):
             best, rivals = next(h for h in [best, *rivals] if h.continued), []  # alike: the motion decides
-        if len(best.scores) < CONFIRM_SCANS or rivals or np.mean(best.scores[-CONFIRM_SCANS:]) < FIX_SCORE:
+        needed = FIX_SCORE if self._lost_since is None else max(FIX_SCORE, RECOVER_RATIO * self._typical_before_loss)
+        if len(best.scores) < CONFIRM_SCANS or rivals or np.mean(best.scores[-CONFIRM_SCANS:]) < needed:
             return False
         self.committed, self.hypotheses = best, [best]
         self.typical.extend(best.scores)
@@ -256,28 +267,29 @@ class MapLocalizer:
 
     # -- matching -------------------------------------------------------------------------------
 
-    def _follow(self, h: _Hypothesis, index: int, stamp_ns: int, points: np.ndarray, motion: np.ndarray | None,
-                dt: float) -> float:
-        """Move hypothesis ``h`` to scan ``index``: prior from the motion, matched against the map."""
-        step, sd = None, None
-        if motion is not None:
-            step = motion
-            sd = np.array([ODOM_NOISE_M, ODOM_NOISE_M, ODOM_NOISE_RAD]) + np.array(
-                [ODOM_NOISE_RATIO, ODOM_NOISE_RATIO, 0.0]) * math.hypot(step[0], step[1]) + np.array(
-                [0.0, 0.0, ODOM_TURN_NOISE_RATIO]) * abs(step[2])
-        elif h.velocity is not None and dt > 0:
-            step = h.velocity * dt
-            sd = np.array([CV_STEADY_M, CV_STEADY_M, CV_STEADY_RAD]) + CV_STEADY_RATIO * np.abs(
-                np.array([math.hypot(step[0], step[1])] * 2 + [step[2]]))
-        prior = h.pose.copy() if step is None else se2_compose(h.pose, step)
-        pose, score = self._match(points, prior, sd)
+    def _follow(self, h: _Hypothesis, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None,
+                wide: bool = False) -> float:
+        """Move hypothesis ``h`` to scan ``index``: its prior from the odometry since its last good match (or its
+        recent velocity), matched against the map (``wide``: a wide local search first)."""
+        prior, sd = self._prior(h, stamp_ns, odom)
+        pose, score = self._match(points, prior, sd, wide)
+        jump = se2_between(prior, pose)
+        jumped = abs(jump[0]) > WINDOW[0] or abs(jump[1]) > WINDOW[1] or abs(jump[2]) > WINDOW[2]
+        if h is self.committed and score >= self._poor() and jumped:
+            # The scans put the robot where its motion cannot have taken it (a kidnap, an odometry glitch):
+            # lost and found again at once, said like any loss.
+            self.events.append(Event("lost", index, stamp_ns, prior.copy()))
+            self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
         if score >= self._poor():
-            if dt > 0 and motion is None:
-                h.velocity = se2_between(h.pose, pose) / dt
+            if sd is not None and not jumped:
+                # The map's answer corrects the motion's prediction by a share (a fixed-gain filter, as a
+                # localizer's map -> odom moves slowly): each scan's matching noise is smoothed out, a drift is not.
+                pose = se2_compose(prior, MAP_GAIN * se2_between(prior, pose))
             h.pose, h.misses = pose, 0
+            h.anchor = None if odom is None else (pose.copy(), odom.copy())
+            h.recent.append((stamp_ns, pose.copy()))
         else:
             h.pose, h.misses = prior, h.misses + 1
-            h.velocity = None
         h.poses[index] = h.pose.copy()
         h.scores.append(score)
         if self.committed is not h:  # only while places compete
@@ -285,22 +297,53 @@ class MapLocalizer:
         h.stamp_ns = stamp_ns
         return score
 
-    def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None) -> tuple[np.ndarray, float]:
+    def _prior(self, h: _Hypothesis, stamp_ns: int, odom: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Where ``h`` should be at ``stamp_ns`` and the standard deviations (3,) of that (None: unknown): its
+        last good pose moved by the odometry since (noise growing with the motion), else by its velocity over at
+        least VELOCITY_SPAN_S of good matches (a scan stamped out of order moves back along it)."""
+        if odom is not None and h.anchor is not None:
+            pose, at = h.anchor
+            step = se2_between(at, odom)
+            grow = np.array([ODOM_NOISE_RATIO, ODOM_NOISE_RATIO, 0.0]) * math.hypot(step[0], step[1]) + np.array(
+                [0.0, 0.0, ODOM_TURN_NOISE_RATIO]) * abs(step[2])
+            return se2_compose(pose, step), np.array([ODOM_NOISE_M, ODOM_NOISE_M, ODOM_NOISE_RAD]) + grow
+        if len(h.recent) >= 2:
+            t1, p1 = h.recent[-1]
+            older = [(t, p) for t, p in h.recent if (t1 - t) * 1e-9 >= VELOCITY_SPAN_S]
+            if older:
+                t0, p0 = older[-1]
+                rate = se2_between(p0, p1) / ((t1 - t0) * 1e-9)
+                step = rate * ((stamp_ns - t1) * 1e-9)
+                sd = np.array([CV_STEADY_M, CV_STEADY_M, CV_STEADY_RAD]) + CV_STEADY_RATIO * np.abs(
+                    np.array([math.hypot(step[0], step[1])] * 2 + [step[2]]))
+                return se2_compose(p1, step), sd
+        return h.pose.copy(), None
+
+    def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None,
+               wide: bool = False) -> tuple[np.ndarray, float]:
         """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
         its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
-        first when the motion is unknown, or when NDT's result is poor or far from the prior."""
+        when the motion is unknown, or when NDT's result is poor or far from the prior; a wide local search
+        (LOCAL_WINDOW) when that is poor too, or first with ``wide``."""
         held = None
-        if sd is not None:
+        if sd is not None and not wide:
             pose, score = held = self._refine(points, prior, prior, sd)
             jump = se2_between(prior, pose)
             if score >= self._poor() and math.hypot(jump[0], jump[1]) <= NDT_JUMP[0] and abs(jump[2]) <= NDT_JUMP[1]:
                 return pose, score
-        found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=WINDOW)
-        start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
-        searched = self._refine(points, start, prior if sd is not None else None, sd)
-        if held is not None and searched[1] < held[1] + SWITCH_MARGIN:
-            return held  # the scan does not clearly say the motion is wrong (a map missing what the robot sees)
-        return searched
+        best = held
+        for window in ((LOCAL_WINDOW,) if wide else (WINDOW, LOCAL_WINDOW)):
+            found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=window)
+            start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
+            searched = self._refine(points, start, prior if sd is not None and window is WINDOW else None, sd)
+            # The scan must clearly say the motion was wrong (else a map missing what it sees), and far from the
+            # prior it must match as well as the robot typically does.
+            needed = self._poor() if window is WINDOW else max(self._poor(), RECOVER_RATIO * self._typical())
+            if (best is None or searched[1] >= best[1] + SWITCH_MARGIN) and searched[1] >= needed:
+                return searched
+            if best is None or searched[1] > best[1]:
+                best = searched if window is WINDOW or best is None else best
+        return best
 
     def _refine(self, points: np.ndarray, start: np.ndarray, prior: np.ndarray | None = None,
                 sd: np.ndarray | None = None) -> tuple[np.ndarray, float]:

@@ -216,6 +216,16 @@ class NdtOdomPipeline:
         odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
         return ScanInputs(stamps, points, order, odometry, self.T_base_scan)
 
+    def register(self, inputs: ScanInputs) -> tuple[LaserOdometry, np.ndarray]:
+        """The laser odometry of :meth:`read_inputs`' scans: the front end, and the base's poses (N, 3)
+        [x, y, theta] in the odometry frame at the scans' stamps (stamp order; registered in recording order)."""
+        order, odometry = inputs.order, inputs.odometry
+        front = self._register(inputs.stamps_ns[order], [inputs.points[i] for i in order],
+                               None if odometry is None else (odometry[0][order], odometry[1][order]))
+        poses = np.empty((len(inputs.stamps_ns), 3))
+        poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
+        return front, poses
+
     def no_scan_problem(self) -> str:
         """Why there is no usable scan, in words (after :meth:`read_inputs` found none)."""
         return (f"no usable scan on {self.options.topic}: every scan was skipped "
@@ -232,11 +242,8 @@ class NdtOdomPipeline:
                 return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), self.no_scan_problem())
             order, odometry = inputs.order, inputs.odometry
             t0 = time.perf_counter()
-            front = self._register(stamps[order], [points[i] for i in order],
-                                   None if odometry is None else (odometry[0][order], odometry[1][order]))
+            front, poses = self.register(inputs)
             elapsed_s = time.perf_counter() - t0
-            poses = np.empty((len(stamps), 3))
-            poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
             trajectory = Trajectory(stamps, pose2tform(poses))
             odom_traj = None if odometry is None else Trajectory(stamps, odometry[0])
             self._check_frozen(points, order, odometry)
