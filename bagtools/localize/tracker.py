@@ -29,9 +29,6 @@ or more hypotheses of the base's pose in the map:
   is counted, said, and searched for again, where it was (moved by the motion
   since, in a wide window) competing with the global search's places; a place
   found after a loss must score ``RECOVER_RATIO`` of the typical score before it.
-  The map's answer corrects the motion's prediction by ``MAP_GAIN`` per scan (a
-  fixed-gain filter): each scan's matching noise is smoothed away, a drift is
-  corrected within a few seconds.
 
 Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base +
 [x, y]``); scores are :meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
@@ -74,8 +71,6 @@ TYPICAL_SCANS = 50
 #: the wide local window searched when that fails too (a fast turn, an odometry glitch) before a scan is a miss.
 WINDOW = (0.5, 0.5, 0.4)
 LOCAL_WINDOW = (2.0, 2.0, math.pi / 2)
-#: The share of the map's correction of the motion's prediction taken at each scan (1: the map's answer alone).
-MAP_GAIN = 0.1
 #: A place found after a loss is committed only when it scores this share of the typical score before the loss.
 RECOVER_RATIO = 0.8
 #: NDT's result is not trusted when it moves this far from its prior (m, rad).
@@ -274,17 +269,13 @@ class MapLocalizer:
         prior, sd = self._prior(h, stamp_ns, odom)
         pose, score = self._match(points, prior, sd, wide)
         jump = se2_between(prior, pose)
-        jumped = abs(jump[0]) > WINDOW[0] or abs(jump[1]) > WINDOW[1] or abs(jump[2]) > WINDOW[2]
-        if h is self.committed and score >= self._poor() and jumped:
+        if h is self.committed and score >= self._poor() and (
+                abs(jump[0]) > WINDOW[0] or abs(jump[1]) > WINDOW[1] or abs(jump[2]) > WINDOW[2]):
             # The scans put the robot where its motion cannot have taken it (a kidnap, an odometry glitch):
             # lost and found again at once, said like any loss.
             self.events.append(Event("lost", index, stamp_ns, prior.copy()))
             self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
         if score >= self._poor():
-            if sd is not None and not jumped:
-                # The map's answer corrects the motion's prediction by a share (a fixed-gain filter, as a
-                # localizer's map -> odom moves slowly): each scan's matching noise is smoothed out, a drift is not.
-                pose = se2_compose(prior, MAP_GAIN * se2_between(prior, pose))
             h.pose, h.misses = pose, 0
             h.anchor = None if odom is None else (pose.copy(), odom.copy())
             h.recent.append((stamp_ns, pose.copy()))
