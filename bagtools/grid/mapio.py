@@ -133,6 +133,19 @@ class Nav2Map:
         out[self.occupancy == 0] = 0
         return out
 
+    def known(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: whether the map knows what is at map-frame places ``xy`` (N, 2) (m): a free or occupied
+        cell, not an unknown one, nor a place off the image."""
+        x, y, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        local = (np.asarray(xy, dtype=np.float64).reshape(-1, 2) - np.array([x, y])) @ np.array([[c, -s], [s, c]])
+        cols = np.floor(local[:, 0] / self.resolution_m).astype(np.intp)
+        rows = self.occupancy.shape[0] - 1 - np.floor(local[:, 1] / self.resolution_m).astype(np.intp)
+        inside = (cols >= 0) & (cols < self.occupancy.shape[1]) & (rows >= 0) & (rows < self.occupancy.shape[0])
+        out = np.zeros(len(local), dtype=bool)
+        out[inside] = self.occupancy[rows[inside], cols[inside]] >= 0
+        return out
+
     def occupied_points(self) -> np.ndarray:
         """(N, 2) map-frame x, y (m) of the centres of the occupied cells (occupancy 100), the origin's yaw
         applied as map_server places the image: its lower-left pixel's corner at the origin pose."""

@@ -24,7 +24,9 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import open_bag
-from bagtools.localize.tracker import AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, Event, MapLocalizer
+from bagtools.localize.tracker import (
+    AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
+)
 from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
@@ -148,7 +150,7 @@ class LocalizePipeline:
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,
                                      None if self.options.initial_pose is None else np.array(self.options.initial_pose),
-                                     sensor_xy=tuple(inputs.T_base_scan[:2, 3]))
+                                     sensor_xy=tuple(inputs.T_base_scan[:2, 3]), known=nav2_map.known)
         except ValueError as err:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
         t0 = time.perf_counter()
@@ -185,7 +187,7 @@ class LocalizePipeline:
         duration_s = max((int(stamps[-1]) - int(stamps[0])) * 1e-9, 1e-9)
         fixes = [e for e in result.events if e.kind == "fix"]
         counts = {state: int(np.count_nonzero(result.states == state))
-                  for state in (SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, LOST)}
+                  for state in (SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, UNMAPPED, LOST)}
         summary: dict = {
             "bag": str(self.bag_path),
             "map": str(self.map_yaml),
@@ -215,6 +217,9 @@ class LocalizePipeline:
         if counts[AMBIGUOUS]:
             self.warnings.append(f"{counts[AMBIGUOUS]} scan(s) matched several places of the map alike for longer "
                                  f"than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats itself)")
+        if counts[UNMAPPED]:
+            self.warnings.append(f"{counts[UNMAPPED]} scan(s) saw mostly what the map does not know (off the map): "
+                                 "their poses are carried by the laser odometry")
         if summary["lost"]:
             losses = [e for e in result.events if e.kind == "lost"]
             places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})" for e in losses[:3])

@@ -29,6 +29,9 @@ or more hypotheses of the base's pose in the map:
   is counted, said, and searched for again, where it was (moved by the motion
   since, in a wide window) competing with the global search's places; a place
   found after a loss must score ``RECOVER_RATIO`` of the typical score before it.
+  A poorly matched scan that falls mostly where the map knows nothing is off the
+  map, not lost (**unmapped**): the motion carries the pose until the map is
+  seen again.
 
 Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base +
 [x, y]``); scores are :meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
@@ -38,6 +41,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,13 +87,17 @@ DIVERGED_SCORE = 0.05
 THROUGH_TOLERANCE_M = 0.15
 #: Beams tested for passing through walls at most this many per scan (spread over the scan), each up to this range (m).
 THROUGH_BEAMS, THROUGH_RANGE_M = 120, 10.0
+#: A poorly matched scan with less than this share of its returns where the map knows what is there is off the
+#: map (a place the map never saw): the motion carries the pose ('unmapped'), and it is no miss.
+MAPPED_SHARE = 0.5
 #: Cell of the map's normal distributions (m).
 NDT_CELL_M = 0.5
 #: Hypotheses at most this many; a search that finds none is repeated this many scans later.
 MAX_HYPOTHESES = 4
 SEARCH_EVERY_SCANS = 5
 
-SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, LOST = "searching", "confirming", "ambiguous", "tracking", "lost"
+SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, UNMAPPED, LOST = (
+    "searching", "confirming", "ambiguous", "tracking", "unmapped", "lost")
 
 
 @dataclass
@@ -106,6 +114,7 @@ class _Hypothesis:
     recent: deque = field(default_factory=lambda: deque(maxlen=50))  # (stamp_ns, map pose) of its good matches
     stamp_ns: int = 0
     continued: bool = False  # where the robot was before it was lost, moved by the motion since
+    coasting: bool = False  # its last scan fell off the map: carried by the motion
 
 
 @dataclass
@@ -128,14 +137,18 @@ class MapLocalizer:
         initial_pose: [x, y, theta] of the base at the first scan, when known (then no global search at the
             start: the first scan is searched within WINDOW of it).
         sensor_xy: where the laser sits on the base (m): the beams' origin.
+        known: map-frame places (N, 2) -> (N,) bool, whether the map knows them (e.g. :meth:`Nav2Map.known`):
+            where most of a scan falls on unknown cells, a poor match is the map's gap, not a loss.
     """
 
     def __init__(self, map_points: np.ndarray, resolution_m: float = 0.05,
-                 initial_pose: np.ndarray | None = None, sensor_xy: tuple[float, float] = (0.0, 0.0)) -> None:
+                 initial_pose: np.ndarray | None = None, sensor_xy: tuple[float, float] = (0.0, 0.0),
+                 known: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.search = GlobalLocalizer(map_points, fine_m=resolution_m)
         self.fine = self.search.fine
         self.occupied = self.fine.raster == RASTER_MAX  # the cells that hold a map point
         self.sensor_xy = np.asarray(sensor_xy, dtype=np.float64)
+        self.known = known
         self.ndt = NdtReference.from_points(map_points, cell_size=NDT_CELL_M, cell_model="widened")
         self.hypotheses: list[_Hypothesis] = []
         self.committed: _Hypothesis | None = None
@@ -157,7 +170,7 @@ class MapLocalizer:
         """Localize scan ``index`` (points (M, 2) in the base frame; ``odom`` the base's odometry pose
         [x, y, theta] or None); returns its state: 'searching' (no place matches yet), 'confirming' (places
         followed for fewer than CONFIRM_SCANS scans), 'ambiguous' (places the scans do not tell apart yet),
-        'tracking' or 'lost'."""
+        'tracking', 'unmapped' (off the map: carried by the motion) or 'lost'."""
         odom = None if odom is None else np.asarray(odom, dtype=np.float64)
         if self.committed is not None:
             state = self._track_committed(index, stamp_ns, points, odom)
@@ -171,9 +184,9 @@ class MapLocalizer:
         score = self._follow(h, index, stamp_ns, points, odom)
         if h.misses < LOST_SCANS:
             self.poses[index], self.scores[index] = h.pose.copy(), score
-            if h.misses == 0:
+            if h.misses == 0 and not h.coasting:
                 self.typical.append(score)
-            return TRACKING
+            return UNMAPPED if h.coasting else TRACKING
         last_good = max(k for k in h.poses if k not in self._recent_misses(h, index))
         self.events.append(Event("lost", index, stamp_ns, h.poses[last_good]))
         for k in range(index - LOST_SCANS + 1, index + 1):  # the poorly matched scans are not trusted
@@ -267,7 +280,8 @@ class MapLocalizer:
         """Move hypothesis ``h`` to scan ``index``: its prior from the odometry since its last good match (or its
         recent velocity), matched against the map (``wide``: a wide local search first)."""
         prior, sd = self._prior(h, stamp_ns, odom)
-        pose, score = self._match(points, prior, sd, wide)
+        off_map = h is self.committed and sd is not None and self._mapped(points, prior) < MAPPED_SHARE
+        pose, score = self._match(points, prior, sd, wide, far=not off_map)
         jump = se2_between(prior, pose)
         if h is self.committed and score >= self._poor() and (
                 abs(jump[0]) > WINDOW[0] or abs(jump[1]) > WINDOW[1] or abs(jump[2]) > WINDOW[2]):
@@ -275,10 +289,13 @@ class MapLocalizer:
             # lost and found again at once, said like any loss.
             self.events.append(Event("lost", index, stamp_ns, prior.copy()))
             self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
+        h.coasting = False
         if score >= self._poor():
             h.pose, h.misses = pose, 0
             h.anchor = None if odom is None else (pose.copy(), odom.copy())
             h.recent.append((stamp_ns, pose.copy()))
+        elif off_map:
+            h.pose, h.coasting = prior, True  # off the map: the motion carries the pose, nothing is missed
         else:
             h.pose, h.misses = prior, h.misses + 1
         h.poses[index] = h.pose.copy()
@@ -311,11 +328,11 @@ class MapLocalizer:
         return h.pose.copy(), None
 
     def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None,
-               wide: bool = False) -> tuple[np.ndarray, float]:
+               wide: bool = False, far: bool = True) -> tuple[np.ndarray, float]:
         """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
         its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
         when the motion is unknown, or when NDT's result is poor or far from the prior; a wide local search
-        (LOCAL_WINDOW) when that is poor too, or first with ``wide``."""
+        (LOCAL_WINDOW) when that is poor too and ``far`` (not for a scan off the map), or first with ``wide``."""
         held = None
         if sd is not None and not wide:
             pose, score = held = self._refine(points, prior, prior, sd)
@@ -323,7 +340,7 @@ class MapLocalizer:
             if score >= self._poor() and math.hypot(jump[0], jump[1]) <= NDT_JUMP[0] and abs(jump[2]) <= NDT_JUMP[1]:
                 return pose, score
         best = held
-        for window in ((LOCAL_WINDOW,) if wide else (WINDOW, LOCAL_WINDOW)):
+        for window in ((LOCAL_WINDOW,) if wide else (WINDOW, LOCAL_WINDOW) if far else (WINDOW,)):
             found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=window)
             start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
             searched = self._refine(points, start, prior if sd is not None and window is WINDOW else None, sd)
@@ -373,6 +390,14 @@ class MapLocalizer:
         hit[inside] = self.occupied[cells[inside][:, 0], cells[inside][:, 1]]
         hit &= t[None, :] <= reach[:, None]
         return float(np.count_nonzero(hit.any(axis=1))) / len(pts)
+
+    def _mapped(self, points: np.ndarray, pose: np.ndarray) -> float:
+        """The share of the scan's returns (base frame) that fall, at base pose ``pose``, where the map knows
+        what is there (1.0 without a map of known cells)."""
+        if self.known is None or len(points) == 0:
+            return 1.0
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return float(np.mean(self.known(points @ np.array([[c, s], [-s, c]]) + pose[:2])))
 
     def _poor(self) -> float:
         """Scores under this are poor matches: LOST_RATIO of the typical score, and never under MIN_SCORE."""

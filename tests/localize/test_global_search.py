@@ -90,3 +90,20 @@ def test_real_csail_scans_are_placed_in_the_map_from_one_scan_each(real_dir: Pat
         rank[k] = right[0] if right else None
     assert all(r is not None for r in rank.values()), rank
     assert sum(r == 0 for r in rank.values()) >= 18, rank
+
+
+def test_known_places_are_the_free_and_occupied_cells_placed_by_the_origin(tmp_path: Path) -> None:
+    """A 4 x 3 image: row 0 all unknown (205), the rest free, one black pixel; origin [1, 2, 90 degrees]."""
+    pixels = np.full((3, 4), 254, dtype=np.uint8)
+    pixels[0, :] = 205
+    pixels[1, 2] = 0
+    (tmp_path / "m.pgm").write_bytes(b"P5\n4 3\n255\n" + pixels.tobytes())
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 0.5\norigin: [1.0, 2.0, 1.5707963267948966]\n"
+                                     "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    nav2 = read_nav2_map(tmp_path / "m.yaml")
+    # image column c, row r (from the top) has its centre at x = (c + 0.5) * 0.5, y = (3 - r - 0.5) * 0.5 in the
+    # image frame, turned by 90 degrees about the origin: map x = 1 - y_img, map y = 2 + x_img
+    def centre(r: int, c: int) -> list[float]:
+        return [1.0 - (3 - r - 0.5) * 0.5, 2.0 + (c + 0.5) * 0.5]
+    places = np.array([centre(0, 1), centre(1, 2), centre(2, 3), [10.0, 10.0]])
+    assert nav2.known(places).tolist() == [False, True, True, False]

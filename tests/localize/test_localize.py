@@ -15,7 +15,7 @@ from bagtools.grid import read_nav2_map, write_nav2_map
 from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
-from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING
+from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
 from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
 from bagtools.simtruth import read_ground_truth
 from bagtools.transforms import se2_between, se2_compose, tform2pose
@@ -207,3 +207,23 @@ def test_a_fleet_is_localized_in_one_map(world: dict, tmp_path: Path, capsys) ->
     err = capsys.readouterr().err
     assert bad.value.code == 2 and "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("bagtools: ") and "nowhere.yaml: map YAML not found" in err
+
+
+def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> None:
+    """The map's top third made unknown (a part of the building the map never saw): the figure eight drives into
+    it; there the scans match poorly, the motion carries the pose ('unmapped'), nothing is lost or jumps."""
+    import dataclasses
+
+    inputs, odom, truth = _sequence(world["bag"])
+    nav2 = read_nav2_map(world["map"])
+    occupancy = nav2.occupancy.copy()
+    y = nav2.origin[1] + (occupancy.shape[0] - np.arange(occupancy.shape[0]) - 0.5) * nav2.resolution_m
+    occupancy[y > 0.8, :] = -1
+    cut = dataclasses.replace(nav2, occupancy=occupancy)
+    localizer = MapLocalizer(cut.occupied_points(), cut.resolution_m, known=cut.known)
+    states = [localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
+              for step, k in enumerate(inputs.order)]
+    assert UNMAPPED in states and [e.kind for e in localizer.events] == ["fix"]
+    errors = [np.hypot(*(localizer.poses[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order)
+              if s in localizer.poses]
+    assert len(errors) >= len(states) - 5 and max(errors) < 0.15, max(errors)
