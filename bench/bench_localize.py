@@ -16,6 +16,10 @@ makes of it. Rows, each with its baseline from the same run:
   it to the recovered fix, against the seconds to the first fix at the start.
   Target <= 3 s.
 
+The classic benchmark logs (``../shared/data/benchmark``, skipped when absent; not in ``--quick``): each
+mapped by ``bagtools slam``, then localized in that map with no initial pose, with and without odometry;
+the relations error against slam's own. Target: no worse than slam's.
+
 The global search (CSAIL, skipped when absent):
 
 The map: the CSAIL building (``../shared/data/real/csail_scans``, skipped when
@@ -48,7 +52,47 @@ SIDE_M = 100.0
 
 
 def run(quick: bool) -> list[Row]:
-    return _simulated_rows(quick) + _global_rows(quick)
+    return _simulated_rows(quick) + _global_rows(quick) + ([] if quick else _benchmark_rows())
+
+
+BENCHMARK_DIR = REAL_DIR.parent / "benchmark"
+
+
+def _benchmark_rows() -> list[Row]:
+    """Each classic benchmark log mapped by ``bagtools slam``, then localized in that map with no initial pose
+    (with and without odometry): the relations error of the localization against slam's own (skipped when absent)."""
+    from bagtools.localize import LocalizeOptions, LocalizePipeline
+    from bagtools.slam import SlamOptions, SlamPipeline
+    from bagtools.grid import write_nav2_map
+    from bagtools.trajectory import read_relations
+    from bagtools.trajectory.relations import relation_errors
+
+    rows: list[Row] = []
+    for log in ("aces", "intel", "fr079"):
+        bag, relations = BENCHMARK_DIR / f"{log}.bag", BENCHMARK_DIR / f"{log}.relations"
+        if not (bag.is_file() and relations.is_file()):
+            continue
+        reference = read_relations(relations)
+        slam = SlamPipeline(bag, SlamOptions()).run()
+        slam_error = relation_errors(reference, slam.trajectory)
+        with tempfile.TemporaryDirectory(prefix="bench_localize_") as tmp:
+            map_yaml = write_nav2_map(slam.grid, Path(tmp) / "map")
+            for odometry in (True, False):
+                result = LocalizePipeline(bag, map_yaml, LocalizeOptions(use_odometry=odometry)).run()
+                error = relation_errors(reference, result.trajectory)
+                mode = "with odometry" if odometry else "scans only"
+                s = result.summary
+                rows.append(Row("localize", f"relations error mean, {log} in its slam map, {mode} (max "
+                                f"{error['trans_max_m']:.2f} m; {error['used']} of {len(reference)} scored; "
+                                f"{s['scans_localized']} of {s['scans']} scans; lost {s['lost']})",
+                                error["trans_mean_m"], "m", "slam's own trajectory", slam_error["trans_mean_m"], False,
+                                "<= slam's"))
+                rows.append(Row("localize", f"speed, {log}, {mode} (laser odometry and tracking)",
+                                s["speed_x_real_time"], "x real time", "slam, whole command",
+                                s["scans"] and slam.summary["timing_s"]["total"] and
+                                (int(result.stamps_ns[-1]) - int(result.stamps_ns[0])) * 1e-9
+                                / slam.summary["timing_s"]["total"], True, ">= 50"))
+    return rows
 
 
 def _sequence(bag: Path):

@@ -20,7 +20,7 @@ import numpy as np
 from bagtools.cloudmap.accumulator import MapCloud
 
 #: Bytes of held points kept in memory; more are written to a temporary directory in batches of this size.
-MEMORY_BUDGET_BYTES = 256 * 1024 * 1024
+MEMORY_BUDGET_BYTES = 64 * 1024 * 1024
 
 
 class HeldCloud(NamedTuple):
