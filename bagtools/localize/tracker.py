@@ -1,8 +1,9 @@
 """Where the robot is in a map it already has, scan by scan, from no initial pose.
 
 :class:`MapLocalizer` takes the scans in recording order (points in the robot
-base frame, with the wheel odometry's pose when the bag has it) and keeps one
-or more hypotheses of the base's pose in the map:
+base frame, with the base's odometry pose: the pipeline gives the laser
+odometry, which uses the wheels when the bag has them) and keeps one or more
+hypotheses of the base's pose in the map:
 
 - **searching**: no hypothesis. The global search (:class:`GlobalLocalizer`)
   places the scan anywhere in the map at any heading; its distinct places
@@ -14,10 +15,10 @@ or more hypotheses of the base's pose in the map:
   first fix. A hypothesis' evidence for a scan is its score times the share of
   the scan's beams that do not pass through the map's walls on their way to
   their return: in a room that looks alike turned around, the look-alike place
-  puts some walls where the robot saw through. Hypotheses the scans do not tell apart by then are *ambiguous*,
-  and a map that repeats itself stays so until the robot sees what tells the
-  places apart. The committed hypothesis' earlier poses
-  are kept: the trajectory covers the scans since its search.
+  puts some walls where the robot saw through. Hypotheses the scans do not tell
+  apart by then are *ambiguous*, and a map that repeats itself stays so until
+  the robot sees what tells the places apart. The committed hypothesis' earlier
+  poses are kept: the trajectory covers the scans since its search.
 - **tracking**: each scan matched against the map (not against the previous
   scan), from the last good pose moved by the odometry since (or, without
   odometry, by the velocity of the last half second of good matches): NDT on
