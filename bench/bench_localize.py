@@ -95,7 +95,9 @@ def _benchmark_rows() -> list[Row]:
     return rows
 
 
-def _sequence(bag: Path):
+def scan_sequence(bag: Path):
+    """A simulated bag's scans as the localizer takes them (base frame, recording order), its odometry poses
+    (N, 3) and the ground truth (N, 3) at the scan stamps."""
     from bagtools.io import open_bag
     from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
     from bagtools.simtruth import read_ground_truth
@@ -142,7 +144,7 @@ def _simulated_rows(quick: bool) -> list[Row]:
                             "the bag's AMCL-like localizer (map -> odom)", truth["bag_localizer"][ape]["rmse"], False,
                             "<= 0.01 m"))
         del front
-        inputs, odom, truth = _sequence(bag)
+        inputs, odom, truth = scan_sequence(bag)
         nav2 = read_nav2_map(maps["ground-truth grid"])
         points = nav2.occupied_points()
         n_starts = 20 if quick else 100

@@ -2,25 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import click
 
 from bagtools.cli.complete import complete_topics
-from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
-
-
-def initial_pose(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
-    """``--initial-pose X,Y,YAW`` (metres, metres, radians, map frame) as a tuple, or None."""
-    if value is None:
-        return None
-    try:
-        x, y, yaw = (float(v) for v in value.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected X,Y,YAW (metres, metres, radians), got {value!r}") from None
-    if not all(math.isfinite(v) for v in (x, y, yaw)):
-        raise click.BadParameter(f"expected three finite numbers, got {value!r}")
-    return (x, y, yaw)
+from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, initial_pose, scan_frame_offset
 
 
 @click.command("localize")
@@ -85,7 +70,9 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
                    f"deg from ours on average (max {own['translation_m']['max']:.3f} m), parting in "
                    f"{len(own['parts'])} stretch(es)")
     for name, label in (("ours", "ours"), ("bag_localizer", "the bag's localizer")):
-        ape = s.get("ground_truth", {}).get(name, {}).get("ape_m", {}).get("rmse")
-        if ape is not None:
-            click.echo(f"APE against /ground_truth, {label}: {ape:.4f} m (rmse)")
+        errors = s.get("ground_truth", {}).get(name, {})
+        ape, aligned = errors.get("ape_m", {}).get("rmse"), errors.get("ape_aligned_m", {}).get("rmse")
+        if ape is not None and aligned is not None:
+            click.echo(f"APE against /ground_truth, {label}: {ape:.4f} m (rmse), {aligned:.4f} m after SE(2) alignment "
+                       "(a map made by SLAM has its own frame)")
     click.echo(f"wrote {', '.join(p.name for p in written)} in {out_dir}")

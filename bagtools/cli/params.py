@@ -11,14 +11,30 @@ import click
 MAX_SCAN_FRAME_OFFSET_M = 100.0
 
 
-def scan_frame_offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
-    """``--scan-frame-offset X,Y,YAW`` (metres, metres, radians) as a tuple, or None."""
-    if value is None:
-        return None
+def _xy_yaw(value: str) -> tuple[float, float, float]:
+    """``X,Y,YAW`` as three floats (click.BadParameter when it is not three numbers)."""
     try:
         x, y, yaw = (float(v) for v in value.split(","))
     except ValueError:
         raise click.BadParameter(f"expected X,Y,YAW (metres, metres, radians), got {value!r}") from None
+    return x, y, yaw
+
+
+def initial_pose(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
+    """``--initial-pose X,Y,YAW`` (metres, metres, radians, map frame) as a tuple, or None."""
+    if value is None:
+        return None
+    pose = _xy_yaw(value)
+    if not all(math.isfinite(v) for v in pose):
+        raise click.BadParameter(f"expected three finite numbers, got {value!r}")
+    return pose
+
+
+def scan_frame_offset(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, float, float] | None:
+    """``--scan-frame-offset X,Y,YAW`` (metres, metres, radians) as a tuple, or None."""
+    if value is None:
+        return None
+    x, y, yaw = _xy_yaw(value)
     if not all(math.isfinite(v) for v in (x, y, yaw)) or max(abs(x), abs(y)) > MAX_SCAN_FRAME_OFFSET_M:
         raise click.BadParameter(f"expected a laser on the robot: X and Y finite and within "
                                  f"{MAX_SCAN_FRAME_OFFSET_M:g} m of the base, YAW finite, got {value!r}")

@@ -16,10 +16,9 @@ from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
 from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
-from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
-from bagtools.simtruth import read_ground_truth
-from bagtools.transforms import se2_between, se2_compose, tform2pose
+from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
+from bench.bench_localize import scan_sequence
 from tests.localize.test_global_search import _room_scan
 
 
@@ -31,16 +30,6 @@ def world(tmp_path_factory) -> dict[str, Path]:
     figure8 = simulate_bag(root / "figure8", SimConfig(duration_s=60.0, route="figure8", seed=5, cloud=False)).path
     grid = GridMapPipeline(lap, GridMapOptions(poses="ground-truth", frame="map")).run().grid
     return {"map": write_nav2_map(grid, root / "map"), "bag": figure8, "root": root}
-
-
-def _sequence(bag: Path) -> tuple:
-    """The bag's scans as the localizer takes them (base frame, recording order), odometry poses and truth."""
-    dataset = NdtOdomPipeline(bag, NdtOdomOptions())
-    with open_bag(bag) as reader:
-        inputs = dataset.read_inputs(reader)
-        stamps, T, _ = read_ground_truth(reader)
-    truth = tform2pose(T)[np.searchsorted(stamps, inputs.stamps_ns).clip(0, len(stamps) - 1)]
-    return inputs, tform2pose(inputs.odometry[0]), truth
 
 
 @pytest.mark.parametrize("odometry", [True, False])
@@ -63,7 +52,7 @@ def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wr
     """Twenty starts along the figure eight, no initial pose (the bench row runs a hundred). The TurtleBot3 world
     looks the same turned by 180 degrees from many places (the top and bottom walls): there the scans cannot tell
     the two places apart until the robot sees the sides, and the localizer must say so rather than guess."""
-    inputs, odom, truth = _sequence(world["bag"])
+    inputs, odom, truth = scan_sequence(world["bag"])
     nav2 = read_nav2_map(world["map"])
     starts = np.random.default_rng(7).choice(len(odom) - 20, size=20, replace=False)
     fixed = alike = 0
@@ -85,7 +74,7 @@ def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wr
 def test_a_kidnapped_robot_is_lost_and_recovered_within_three_seconds(world: dict) -> None:
     """Carried 2.5 m mid-bag: from scan 120 on the scans are those of a place 2.5 m away (the wheels saw
     nothing: the odometry continues from where it was)."""
-    inputs, odom, truth = _sequence(world["bag"])
+    inputs, odom, truth = scan_sequence(world["bag"])
     nav2 = read_nav2_map(world["map"])
     k0 = 120
     far = np.hypot(*(truth[:, :2] - truth[k0, :2]).T)
@@ -179,7 +168,7 @@ def test_bad_input_is_one_line_and_exit_2(world: dict, tmp_path: Path, capsys, c
 
 
 def test_an_initial_pose_skips_the_global_search(world: dict) -> None:
-    inputs, _, truth = _sequence(world["bag"])
+    inputs, _, truth = scan_sequence(world["bag"])
     start = truth[inputs.order[0]]
     guess = (float(start[0]) + 0.3, float(start[1]) - 0.2, float(start[2]) + 0.2)
     result = LocalizePipeline(world["bag"], world["map"], LocalizeOptions(initial_pose=guess)).run()
@@ -214,7 +203,7 @@ def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> N
     it; there the scans match poorly, the motion carries the pose ('unmapped'), nothing is lost or jumps."""
     import dataclasses
 
-    inputs, odom, truth = _sequence(world["bag"])
+    inputs, odom, truth = scan_sequence(world["bag"])
     nav2 = read_nav2_map(world["map"])
     occupancy = nav2.occupancy.copy()
     y = nav2.origin[1] + (occupancy.shape[0] - np.arange(occupancy.shape[0]) - 0.5) * nav2.resolution_m
