@@ -224,7 +224,7 @@ def _localize_options(p: Mapping[str, Any]) -> WriterConfig:
     read_nav2_map(p["map_yaml"])  # a missing or bad map is one error before any work
     return WriterConfig((str(p["map_yaml"]), LocalizeOptions(
         topic=p["topic"], initial_pose=p["initial_pose"], use_odometry=not p["no_odometry"],
-        scan_frame_offset=p["scan_frame_offset"])), mcap=not p["no_mcap"])
+        scan_frame_offset=p["scan_frame_offset"], smooth=not p["no_smoothing"])), mcap=not p["no_mcap"])
 
 
 def _localize(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:

@@ -20,18 +20,23 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, initial_pose, scan_frame
 @click.option("--no-odometry", is_flag=True, help="Ignore the bag's wheel odometry (/odom, tf): scans only.")
 @click.option("--scan-frame-offset", callback=scan_frame_offset, default=None, metavar="X,Y,YAW",
               help=SCAN_FRAME_OFFSET_HELP)
+@click.option("--no-smoothing", is_flag=True,
+              help="Each scan's own match on the map, as an online localizer has it (default: the path smoothed "
+                   "with the laser odometry, offline).")
 @click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, the paths and the scans, for Foxglove).")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
 def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tuple[float, float, float] | None,
-             no_odometry: bool, scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool,
-             force: bool) -> None:
+             no_odometry: bool, scan_frame_offset: tuple[float, float, float] | None, no_smoothing: bool,
+             no_mcap: bool, force: bool) -> None:
     """Localize BAG's laser scans in a map it already has (nav2 map.yaml), from no initial pose.
 
     The first scans are searched for over the whole map at every heading; the
     places that match are followed until the scans tell them apart (a map that
     repeats itself is said to); then each scan is matched against the map with
     the odometry's step as its prior. A robot that is lost (kidnapped, or where
-    the map no longer fits) is searched for again, counted and shown.
+    the map no longer fits) is searched for again, counted and shown. Last,
+    the path is smoothed: the map matches and the laser odometry in one pose
+    graph (GTSAM), cut where the robot was lost.
 
     Writes OUT/trajectory.tum (the robot base in the map frame at every
     localized scan), map_to_odom.tum (the correction a localizer publishes),
@@ -54,7 +59,7 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
 
     check_outputs(out_dir, LOCALIZE_FILES, force, inputs=[bag, map_yaml])  # fail before the work, not after it
     options = LocalizeOptions(topic=topic, initial_pose=initial_pose, use_odometry=not no_odometry,
-                              scan_frame_offset=scan_frame_offset)
+                              scan_frame_offset=scan_frame_offset, smooth=not no_smoothing)
     result = LocalizePipeline(bag, map_yaml, options, keep_scans=not no_mcap).run()
     s = result.summary
     for warning in s.get("warnings", []):

@@ -3,7 +3,8 @@
     LocalizePipeline(bag, options).run()
         _read()           the map; the scans, their order and odometry, as ndt-odom reads them
         _localize()       the laser odometry (ndt-odom's front end, with the wheels when used) as the motion,
-                          every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track
+                          every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track;
+                          then the tracked poses smoothed with the laser odometry (bagtools.localize.smoother)
         _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
         _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
         _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
@@ -24,6 +25,7 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import open_bag
+from bagtools.localize.smoother import smooth_track
 from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
@@ -43,12 +45,14 @@ PART_M, PART_DEG = 0.3, 10.0
 class LocalizeOptions:
     """What to localize and how: the scan ``topic``; ``initial_pose`` [x, y, yaw] of the base in the map
     (None: search the whole map); ``use_odometry`` (the wheels' motion as the prior of each scan);
-    ``scan_frame_offset`` (x, y, yaw) of the laser on the base when tf lacks it."""
+    ``scan_frame_offset`` (x, y, yaw) of the laser on the base when tf lacks it; ``smooth`` (the tracked poses
+    smoothed with the laser odometry, offline; False: each scan's own match, as an online localizer has it)."""
 
     topic: str = "/scan"
     initial_pose: tuple[float, float, float] | None = None
     use_odometry: bool = True
     scan_frame_offset: tuple[float, float, float] | None = None
+    smooth: bool = True
 
     def __post_init__(self) -> None:
         for name, value in (("--initial-pose", self.initial_pose), ("--scan-frame-offset", self.scan_frame_offset)):
@@ -99,7 +103,7 @@ class LocalizePipeline:
         nav2_map = read_nav2_map(self.map_yaml)
         with open_bag(self.bag_path) as bag:
             dataset, inputs = self._read(bag)
-            localizer, elapsed_s = self._localize(nav2_map, dataset, inputs)
+            localizer, tracked, elapsed_s = self._localize(nav2_map, dataset, inputs)
             own = self._bag_localizer(dataset, inputs)
             truth = self._ground_truth(bag, dataset)
         self.warnings = list(dict.fromkeys(dataset.warnings + self.warnings))
@@ -110,8 +114,8 @@ class LocalizePipeline:
         for step, k in enumerate(inputs.order):  # the localizer saw the scans in recording order
             states[k] = localizer.states[step]
             scores[k] = localizer.scores.get(step, 0.0)
-            if step in localizer.poses:
-                poses[k] = localizer.poses[step]
+            if step in tracked:
+                poses[k] = tracked[step]
         events = [Event(e.kind, int(inputs.order[e.index]), e.stamp_ns, e.pose) for e in localizer.events]
         known = np.isfinite(poses).all(axis=1)
         if not known.any():
@@ -142,10 +146,11 @@ class LocalizePipeline:
         return dataset, inputs
 
     def _localize(self, nav2_map: Nav2Map, dataset: NdtOdomPipeline,
-                  inputs: ScanInputs) -> tuple[MapLocalizer, float]:
+                  inputs: ScanInputs) -> tuple[MapLocalizer, dict[int, np.ndarray], float]:
         """Every scan, in recording order, through the localizer, its motion prior the laser odometry (ndt-odom's
-        front end: the scans matched to each other, with the wheel odometry when the bag has it and used);
-        returns the localizer and the seconds both took."""
+        front end: the scans matched to each other, with the wheel odometry when the bag has it and used), then
+        the tracked poses smoothed with that odometry (unless not ``smooth``); returns the localizer, the poses
+        (step in recording order -> [x, y, theta] in the map) and the seconds it all took."""
         points = nav2_map.occupied_points()
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,
@@ -158,7 +163,11 @@ class LocalizePipeline:
         self.warnings.extend(front.warnings(self.options.topic))
         for step, k in enumerate(progress(inputs.order, total=len(inputs.order), desc="localizing", unit="scan")):
             localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
-        return localizer, time.perf_counter() - t0
+        poses = localizer.poses
+        if self.options.smooth:
+            poses = smooth_track(front.run.steps, localizer.poses, localizer.matched,
+                                 cuts=[e.index for e in localizer.events if e.kind == "lost"])
+        return localizer, poses, time.perf_counter() - t0
 
     def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
         """The bag's own map -> base at the scan stamps (its localizer's map -> odom on /tf, composed), or None."""
@@ -206,6 +215,7 @@ class LocalizePipeline:
                        for e in result.events],
             "global_searches": localizer.searches,
             "odometry_used": result.map_to_odom is not None,
+            "smoothed": self.options.smooth,
             "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
             "per_scan": {"stamp_ns": [int(s) for s in stamps], "state": [str(s) for s in result.states],
                          "score": [round(float(s), 4) for s in result.scores]},

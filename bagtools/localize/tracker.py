@@ -108,6 +108,7 @@ class _Hypothesis:
     pose: np.ndarray
     since: int  # the scan it was born at
     poses: dict[int, np.ndarray] = field(default_factory=dict)
+    matched: set[int] = field(default_factory=set)  # the scans it matched well on the map
     scores: list[float] = field(default_factory=list)
     evidence: list[float] = field(default_factory=list)  # score x share of beams not through walls, per scan
     misses: int = 0
@@ -154,6 +155,7 @@ class MapLocalizer:
         self.hypotheses: list[_Hypothesis] = []
         self.committed: _Hypothesis | None = None
         self.poses: dict[int, np.ndarray] = {}  # scan index -> map pose, once known
+        self.matched: set[int] = set()  # the scans of self.poses placed by a good match on the map (not the motion)
         self.scores: dict[int, float] = {}
         self.states: list[str] = []
         self.events: list[Event] = []
@@ -185,6 +187,8 @@ class MapLocalizer:
         score = self._follow(h, index, stamp_ns, points, odom)
         if h.misses < LOST_SCANS:
             self.poses[index], self.scores[index] = h.pose.copy(), score
+            if index in h.matched:
+                self.matched.add(index)
             if h.misses == 0 and not h.coasting:
                 self.typical.append(score)
             return UNMAPPED if h.coasting else TRACKING
@@ -192,6 +196,7 @@ class MapLocalizer:
         self.events.append(Event("lost", index, stamp_ns, h.poses[last_good]))
         for k in range(index - LOST_SCANS + 1, index + 1):  # the poorly matched scans are not trusted
             self.poses.pop(k, None)
+            self.matched.discard(k)
         self.committed, self.hypotheses = None, []
         self._continued = h  # searched again with the global search's places: the robot may not have moved
         self._typical_before_loss = self._typical()
@@ -233,6 +238,7 @@ class MapLocalizer:
             if score >= MIN_SCORE:
                 h = _Hypothesis(pose, index, stamp_ns=stamp_ns)
                 h.poses[index] = pose.copy()
+                h.matched.add(index)
                 h.scores.append(score)
                 h.evidence.append(score * (1.0 - self.through_walls(points, pose)))
                 h.anchor = None if odom is None else (pose.copy(), odom.copy())
@@ -261,6 +267,7 @@ class MapLocalizer:
         self.typical.extend(best.scores)
         for (k, pose), score in zip(best.poses.items(), best.scores):  # the scans since its search, in hindsight
             self.poses[k], self.scores[k] = pose, score
+        self.matched |= best.matched
         kind = "recovered" if self._lost_since is not None else "fix"
         self.events.append(Event(kind, index, stamp_ns, best.pose.copy()))
         self._lost_since = None
@@ -293,6 +300,7 @@ class MapLocalizer:
         h.coasting = False
         if score >= self._poor():
             h.pose, h.misses = pose, 0
+            h.matched.add(index)
             h.anchor = None if odom is None else (pose.copy(), odom.copy())
             h.recent.append((stamp_ns, pose.copy()))
         elif off_map:

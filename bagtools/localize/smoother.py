@@ -1,0 +1,124 @@
+"""The tracked poses smoothed offline: map matches and laser odometry in one pose graph (GTSAM).
+
+The tracker places each scan alone against the map. Its poses carry the map
+match's noise (the raster's cells, walls the map draws a little elsewhere),
+which differs from one scan to the next; the laser odometry's matches of each
+scan against its keyframe are far more precise over a short span, but drift.
+:func:`smooth_track` joins the two, as a localizer that keeps a trajectory
+would (Cartographer's pure localization optimizes its trajectory against the
+frozen map):
+
+- nodes: the scans the tracker placed, at its poses;
+- between factors: the front end's matches (``T_ref_cur`` of each scan
+  against its keyframe, with the matcher's covariance), Gaussian;
+- prior factors: the scans matched well on the map (not carried by the
+  motion), at the tracker's pose with ``MAP_SIGMA``, under a Cauchy kernel:
+  a match the motion contradicts pulls with a bounded force.
+
+The graph is cut where the tracker lost the robot (a kidnap, or the scans put
+it where its motion could not take it): the stretches on either side are
+smoothed apart, each held by its own map matches. A stretch with no map match
+keeps the tracker's poses. Levenberg-Marquardt from the tracker's poses.
+
+Poses are [x, y, theta] of the base in the map frame; steps are the front
+end's, in recording order, indexed like the tracker's scans.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import gtsam
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from bagtools.ndtodom.steps import ScanStep
+from bagtools.slam.graph import check_covariance
+from bagtools.transforms import se2_between
+
+#: Standard deviations (m, m, rad) of a map match's pose in the graph. The matches' errors are not independent
+#: from scan to scan (the map's own errors stay where they are), so they hold the trajectory against drift while
+#: the laser odometry shapes it. Measured on the benchmark logs in their SLAM maps (bench/RESULTS.md).
+MAP_SIGMA = (0.2, 0.2, 0.05)
+#: Cauchy kernel width on the whitened map residual (in sigmas).
+MAP_KERNEL = 2.0
+
+
+def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched: Iterable[int],
+                 cuts: Iterable[int] = ()) -> dict[int, np.ndarray]:
+    """Smoothed map poses of the tracked scans (see the module docstring).
+
+    Args:
+        steps: the front end's steps, one per scan, in recording order.
+        poses: scan index -> [x, y, theta] of the base in the map (the tracker's).
+        matched: the scans of ``poses`` placed by a good map match (prior factors).
+        cuts: scan indexes where the robot was lost: no factor joins a scan before one to a scan at or after it.
+    Returns:
+        scan index -> smoothed [x, y, theta], for every scan of ``poses``.
+    """
+    nodes = sorted(poses)
+    if not nodes:
+        return {}
+    cut_at = np.sort(np.fromiter(cuts, dtype=np.int64))
+    matched = {k for k in matched if k in poses}
+    between = _between_factors(steps, poses, cut_at)
+    number = {k: n for n, k in enumerate(nodes)}
+    # Each stretch joined by the odometry must hold a map match, or its poses stay the tracker's.
+    rows = [number[i] for i, _, _, _ in between]
+    cols = [number[j] for _, j, _, _ in between]
+    _, label = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(nodes),) * 2),
+                                    directed=False)
+    anchored = {label[number[k]] for k in matched}
+    keep = {k for k in nodes if label[number[k]] in anchored}
+
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    for k in keep:
+        values.insert(k, gtsam.Pose2(*poses[k]))
+    for i, j, T, covariance in between:
+        if i in keep:
+            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), gtsam.noiseModel.Gaussian.Covariance(covariance)))
+    noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL),
+                                           gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA)))
+    for k in matched:
+        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*poses[k]), noise))
+    smoothed = {k: np.asarray(poses[k], dtype=np.float64).copy() for k in nodes}
+    if keep:
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(100)
+        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        for k in keep:
+            p = result.atPose2(k)
+            smoothed[k] = np.array([p.x(), p.y(), p.theta()])
+    return smoothed
+
+
+def _between_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],
+                     cut_at: np.ndarray) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+    """(i, j, T_i_j, covariance) of the front end's matches between tracked scans not split by a cut: each scan's
+    match against its keyframe; when that keyframe is not tracked or a cut lies between, the front end's motion
+    from the scan before, with the same covariance."""
+    factors = []
+    for j in sorted(poses):
+        if j == 0 or j >= len(steps):
+            continue
+        s = steps[j]
+        ref = int(s.reference)
+        if ref >= 0 and ref in poses and not _split(cut_at, ref, j):
+            T = np.asarray(s.T_ref_cur, dtype=np.float64)
+        elif j - 1 in poses and not _split(cut_at, j - 1, j):
+            ref, T = j - 1, se2_between(steps[j - 1].pose, s.pose)
+        else:
+            continue
+        try:
+            covariance = check_covariance(s.covariance, f"scan {j}")
+        except ValueError:
+            continue  # a match the front end could not say the uncertainty of joins nothing
+        factors.append((ref, j, T, covariance))
+    return factors
+
+
+def _split(cut_at: np.ndarray, i: int, j: int) -> bool:
+    """Does a cut lie in (i, j]?"""
+    n = np.searchsorted(cut_at, i, side="right")
+    return n < len(cut_at) and cut_at[n] <= j
