@@ -162,7 +162,8 @@ class LocalizePipeline:
         front, odom = dataset.register(inputs)
         self.warnings.extend(front.warnings(self.options.topic))
         for step, k in enumerate(progress(inputs.order, total=len(inputs.order), desc="localizing", unit="scan")):
-            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k],
+                           continuous=front.run.steps[step].trusted)
         poses = localizer.poses
         if self.options.smooth:
             poses = smooth_track(front.run.steps, localizer.poses, localizer.matched,
@@ -210,6 +211,7 @@ class LocalizePipeline:
                 "seconds_after_first_scan": (fixes[0].stamp_ns - int(stamps[0])) * 1e-9},
             "lost": sum(e.kind == "lost" for e in result.events),
             "recovered": sum(e.kind == "recovered" for e in result.events),
+            "corrected": sum(e.kind == "corrected" for e in result.events),
             "events": [{"kind": e.kind, "scan": e.index, "stamp_ns": e.stamp_ns,
                         "pose_xy_yaw": [float(e.pose[0]), float(e.pose[1]), float(wrap_to_pi(e.pose[2]))]}
                        for e in result.events],
@@ -228,8 +230,8 @@ class LocalizePipeline:
             self.warnings.append(f"{counts[AMBIGUOUS]} scan(s) matched several places of the map alike for longer "
                                  f"than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats itself)")
         if counts[UNMAPPED]:
-            self.warnings.append(f"{counts[UNMAPPED]} scan(s) saw mostly what the map does not know (off the map): "
-                                 "their poses are carried by the laser odometry")
+            self.warnings.append(f"{counts[UNMAPPED]} scan(s) saw what the map does not have there (off the map, or "
+                                 "a part it saw only from afar): their poses are carried by the laser odometry")
         if summary["lost"]:
             losses = [e for e in result.events if e.kind == "lost"]
             places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})" for e in losses[:3])

@@ -106,6 +106,10 @@ FINE_SCORE_WINDOW = (0.1, 0.1, 0.02)
 AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
 
 
+#: A step whose match scores under this share of the typical score does not show the scene going on from the
+#: keyframe's (``ScanStep.trusted`` is False): a robot carried away matches nothing of it (a fallback, at 0.1 of the
+#: typical score on simulated kidnaps), while a scan merely harder to match scores 0.6 of it or more.
+CONTINUITY_SCORE_RATIO = 0.5
 #: Odometry's noise per step: a floor plus a share of the motion (sd, m and rad).
 ODOM_NOISE_M, ODOM_NOISE_RATIO = 0.05, 0.1
 ODOM_NOISE_RAD, ODOM_TURN_NOISE_RATIO = 0.05, 0.3
@@ -446,6 +450,8 @@ class LaserOdometry:
         pose[2] = wrap_to_pi(pose[2])
         self._check(last, pose, dt, prior, best)
         self._clock_s += dt
+        trusted = (beyond is None and best.source != "fallback" and not ambiguous  # a jump beyond reach: carried?
+                   and best.score >= self._trust_score(CONTINUITY_SCORE_RATIO))
         if best.source != "fallback":
             velocity = self._mean_velocity(pose, last.pose)  # never beyond what the robot can do
             velocity[:2] *= min(1.0, opts.max_speed_mps / max(float(np.hypot(velocity[0], velocity[1])), 1e-12))
@@ -455,7 +461,7 @@ class LaserOdometry:
         keyframe = self._is_new_keyframe(best)
         covariance = best.covariance + AMBIGUOUS_COVARIANCE if ambiguous else best.covariance
         step = ScanStep(stamp_ns, pose, full, kf.index, best.pose, covariance, best.score, best.source, keyframe,
-                        ambiguous)
+                        ambiguous, trusted)
         if keyframe:
             self._new_keyframe(len(self.run.steps), pose, full)
         return step
@@ -574,11 +580,13 @@ class LaserOdometry:
         rivals = [m for m in matches if m is not best and m.score > 0.8 * best.score]
         return any(not _close(m.pose, best.pose, AGREE_M, AGREE_RAD) for m in rivals)
 
-    def _trust_score(self) -> float:
-        """A score to trust: a share of the recent typical score (the scene decides what is typical)."""
+    def _trust_score(self, ratio: float | None = None) -> float:
+        """A score to trust: a share (``ratio``, default ``trust_score_ratio``) of the recent typical score (the
+        scene decides what is typical), never under ``min_score``."""
         recent = self._scores[-20:]
         typical = float(np.median(recent)) if recent else 0.0
-        return max(self.options.min_score, self.options.trust_score_ratio * typical)
+        share = self.options.trust_score_ratio if ratio is None else ratio
+        return max(self.options.min_score, share * typical)
 
     def _search_window(self, prior: _Prior, dt: float) -> tuple[float, float, float]:
         """The prior's 3-sigma window (x_m, y_m, theta_rad), within what the robot can do in ``dt``."""

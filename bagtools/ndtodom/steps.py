@@ -35,6 +35,9 @@ class ScanStep:
         ambiguous: another place, outside NDT's basin, matched almost as well (see
             :data:`bagtools.ndtodom.frontend.AMBIGUOUS_MARGIN`): the step may be wrong, and its
             ``covariance`` says so (:data:`bagtools.ndtodom.frontend.AMBIGUOUS_COVARIANCE` added).
+        trusted: the scene went on from the keyframe's, so the robot was not carried away between them: no
+            fallback, no jump beyond reach, not ambiguous, and a score of at least
+            :data:`bagtools.ndtodom.frontend.CONTINUITY_SCORE_RATIO` of the typical.
     """
 
     stamp_ns: int
@@ -47,6 +50,7 @@ class ScanStep:
     source: str
     keyframe: bool
     ambiguous: bool = False
+    trusted: bool = True
 
 
 @dataclass

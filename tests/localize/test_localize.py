@@ -216,3 +216,57 @@ def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> N
     errors = [np.hypot(*(localizer.poses[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order)
               if s in localizer.poses]
     assert len(errors) >= len(states) - 5 and max(errors) < 0.15, max(errors)
+
+
+def test_where_the_map_lacks_walls_the_unbroken_laser_odometry_carries_the_pose_nothing_jumps(world: dict,
+                                                                                             tmp_path: Path) -> None:
+    """The map's top third keeps its free space but loses its walls (a part of the building seen from afar: known
+    free, no walls). The scans there match the map poorly, and a look-alike elsewhere may match better; but the
+    laser odometry matched every scan to the last, so the robot was not carried anywhere: no loss, no jump."""
+    from bagtools.grid.mapio import pgm_bytes, read_pgm
+
+    nav2 = read_nav2_map(world["map"])
+    pixels = read_pgm(world["map"].parent / "map.pgm")
+    y = nav2.origin[1] + (pixels.shape[0] - np.arange(pixels.shape[0]) - 0.5) * nav2.resolution_m
+    top = pixels[y > 0.8, :]
+    top[top == 0] = 254  # trinary: occupied (black) made free (white)
+    pixels[y > 0.8, :] = top
+    (tmp_path / "map.pgm").write_bytes(pgm_bytes(pixels))
+    map_yaml = tmp_path / "map.yaml"
+    map_yaml.write_text((world["map"].parent / "map.yaml").read_text())
+    result = LocalizePipeline(world["bag"], map_yaml).run()
+    s = result.summary
+    assert s["lost"] == 0 and s["scans_localized"] == s["scans"], s["events"]
+    assert s["scans_by_state"]["unmapped"] > 0
+    ape = s["ground_truth"]["ours"]["ape_m"]
+    assert ape["max"] < 0.15, ape
+
+
+def test_a_kidnap_in_a_bag_breaks_the_laser_odometry_is_recovered_and_not_smoothed_over(world: dict,
+                                                                                       monkeypatch) -> None:
+    """The whole command on a bag whose scans jump 2.5 m at scan 120 (carried; the wheels saw nothing): the laser
+    odometry cannot match the scan after the jump to the ones before, so the motion no longer bounds where the
+    robot is: lost, searched for, recovered within 3 s, and the smoothing is cut there."""
+    from bagtools.ndtodom.pipeline import NdtOdomPipeline, ScanInputs
+
+    inputs, _, truth = scan_sequence(world["bag"])
+    k0 = 120
+    far = np.hypot(*(truth[:, :2] - truth[k0, :2]).T)
+    j0 = int(np.flatnonzero((far > 2.4) & (np.arange(len(far)) > k0 + 20))[0])
+    keep = np.r_[np.arange(k0), np.arange(j0, len(far))]
+    stamps = inputs.stamps_ns.copy()
+    stamps[j0:] += stamps[k0] - stamps[j0]  # the bag goes on in time from the kidnap
+    T, valid = inputs.odometry
+    T = T.copy()
+    T[j0:] = T[k0 - 1] @ np.linalg.inv(T[j0]) @ T[j0:]  # the wheels go on from where they were
+    kidnapped = ScanInputs(stamps[keep], [inputs.points[k] for k in keep], np.arange(len(keep)),
+                           (T[keep], valid[keep]), inputs.T_base_scan)
+    read = NdtOdomPipeline.read_inputs
+    monkeypatch.setattr(NdtOdomPipeline, "read_inputs", lambda self, bag: (read(self, bag), kidnapped)[1])
+    result = LocalizePipeline(world["bag"], world["map"], LocalizeOptions()).run()
+    kinds = [(e.kind, e.index) for e in result.events]
+    assert [k for k, _ in kinds] == ["fix", "lost", "recovered"], kinds
+    assert kinds[1][1] >= k0 and (stamps[keep][kinds[2][1]] - stamps[k0]) * 1e-9 <= 3.0
+    known = np.isfinite(result.poses).all(axis=1)
+    errors = np.hypot(*(result.poses[known, :2] - truth[keep][known, :2]).T)
+    assert errors.max() < 0.05, errors.max()  # either side of the cut held by its own map matches
