@@ -68,7 +68,7 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
     fix = s["first_fix"]
     fix_text = "no fix" if fix is None else f"first fix {fix['seconds_after_first_scan']:.1f} s after the first scan"
     click.echo(f"{s['scans_localized']} of {s['scans']} scans localized; {fix_text}; lost {s['lost']}, "
-               f"recovered {s['recovered']}; {s['speed_x_real_time']:.0f}x real time")
+               f"recovered {s['recovered']}; corrected {s['corrected']}; {s['speed_x_real_time']:.0f}x real time")
     own = s.get("bag_localizer")
     if own and own.get("scans_compared"):
         click.echo(f"the bag's own localizer: {own['translation_m']['mean']:.3f} m and {own['heading_deg']['mean']:.2f} "

@@ -4,14 +4,16 @@
   any heading, with no initial pose: the distinct places that match it, best first.
 - :class:`MapLocalizer`: the scans of a bag tracked in the map: searched for,
   confirmed among look-alike places, tracked, lost and recovered.
+- :func:`smooth_track`: the tracked poses smoothed with the laser odometry (a GTSAM pose graph).
 - :class:`LocalizePipeline`: a bag in a nav2 map, with the bag's own localizer
   (AMCL's map -> odom) and ground truth compared; :func:`write_localize` its files.
 """
 
 from bagtools.localize.global_search import GlobalLocalizer, Hypothesis
 from bagtools.localize.pipeline import LocalizeOptions, LocalizePipeline, LocalizeResult
+from bagtools.localize.smoother import smooth_track
 from bagtools.localize.tracker import MapLocalizer
 from bagtools.localize.writer import LOCALIZE_FILES, write_localize
 
 __all__ = ["LOCALIZE_FILES", "GlobalLocalizer", "Hypothesis", "LocalizeOptions", "LocalizePipeline", "LocalizeResult",
-           "MapLocalizer", "write_localize"]
+           "MapLocalizer", "smooth_track", "write_localize"]

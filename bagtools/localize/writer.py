@@ -67,9 +67,10 @@ def render_localization_png(result: LocalizeResult) -> bytes:
     s = result.summary
     marks = [(label, np.array([e.pose[:2] for e in result.events if e.kind == kind]).reshape(-1, 2), marker, colour)
              for kind, label, marker, colour in (("fix", "first fix", "*", "tab:green"), ("lost", "lost", "x", "red"),
-                                                 ("recovered", "recovered", "o", "tab:orange"))]
+                                                 ("recovered", "recovered", "o", "tab:orange"),
+                                                 ("corrected", "corrected", "+", "tab:purple"))]
     title = (f"{s.get('topic', '')}: {s.get('scans_localized', 0)} of {s.get('scans', 0)} scans localized, "
-             f"lost {s.get('lost', 0)}, recovered {s.get('recovered', 0)}")
+             f"lost {s.get('lost', 0)}, recovered {s.get('recovered', 0)}, corrected {s.get('corrected', 0)}")
     return render_slam_map_png(map_grid(result.nav2_map), result.poses[:, :2], np.zeros((0, 2, 2)), title, marks=marks)
 
 
@@ -112,7 +113,8 @@ def write_localize_results(bag: ResultsBag, result: LocalizeResult) -> None:
         bag.robot(MAP_FRAME, result.base_frame, result.trajectory.stamps_ns, result.trajectory.poses, sensors)
     if result.scans:
         bag.scans(result.summary.get("topic", "/scan"), result.scans)
-    for kind, rgba in (("lost", (1.0, 0.1, 0.1, 1.0)), ("recovered", (1.0, 0.6, 0.0, 1.0)), ("fix", (0.1, 0.8, 0.1, 1.0))):
+    for kind, rgba in (("lost", (1.0, 0.1, 0.1, 1.0)), ("recovered", (1.0, 0.6, 0.0, 1.0)), ("fix", (0.1, 0.8, 0.1, 1.0)),
+                       ("corrected", (0.6, 0.2, 0.8, 1.0))):
         xy = np.array([e.pose[:2] for e in result.events if e.kind == kind]).reshape(-1, 2)
         if len(xy):
             bag.markers(f"/{kind}", MAP_FRAME, [Markers(kind, "sphere_list", np.c_[xy, np.zeros(len(xy))], rgba, 0.2)])
