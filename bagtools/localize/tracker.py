@@ -59,6 +59,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -100,6 +101,9 @@ SCAN_MATCHED_NOISE_M = 0.02
 #: Where the odometry went on unbroken since the last good match (the robot was not carried), it is within this
 #: many of the prior's standard deviations of where the odometry puts it (they grow with the motion since that match).
 BOUND_SIGMAS = 3.0
+#: A match fixes the position in every direction when the weaker eigenvalue of NDT's translational Hessian is at
+#: least this share of the stronger (0.2 to 0.7 in rooms and crossings on Intel; under 0.02 along its corridors).
+CONSTRAINED_RATIO = 0.05
 #: NDT's result is not trusted when it moves this far from its prior (m, rad).
 NDT_JUMP = (0.25, 0.15)
 #: The window search overrules the motion only when it scores this much more than NDT held by the motion.
@@ -139,7 +143,18 @@ class _Hypothesis:
     stamp_ns: int = 0
     continued: bool = False  # where the robot was before it was lost, moved by the motion since
     unbroken: bool = False  # the odometry since its last good match was continuous throughout
+    loose_m: float = 0.0  # path (m) from its last match that fixed the position in every direction to its anchor
+    loose_dir: np.ndarray | None = None  # the direction (map frame) the matches since did not fix
     coasting: int = 0  # scans in a row carried by the motion (off the map, or a map lacking what it sees)
+
+
+class _Fit(NamedTuple):
+    """A scan matched on the map: base pose [x, y, theta], raster score, and the direction (unit (2,), map frame)
+    along which the map does not fix the position there (a bare corridor's), None where it fixes it in every one."""
+
+    pose: np.ndarray
+    score: float
+    loose: np.ndarray | None
 
 
 @dataclass
@@ -263,7 +278,7 @@ class MapLocalizer:
             self.searches += 1
             places = [h.pose for h in self.search.search(points, max_hypotheses=MAX_HYPOTHESES)]
         for pose in places:
-            pose, score = self._refine(points, np.asarray(pose, dtype=np.float64))
+            pose, score, _ = self._refine(points, np.asarray(pose, dtype=np.float64))
             if score >= MIN_SCORE:
                 h = _Hypothesis(pose, index, stamp_ns=stamp_ns)
                 h.poses[index] = pose.copy()
@@ -321,8 +336,8 @@ class MapLocalizer:
         off_map = h is self.committed and sd is not None and self._mapped(points, prior) < MAPPED_SHARE
         # Carried by an unbroken motion, the robot is searched for around the prior only every SEARCH_EVERY_SCANS.
         search = not (bounded and h.coasting % SEARCH_EVERY_SCANS)
-        reach = BOUND_SIGMAS * sd if bounded else None
-        pose, score = self._match(points, prior, sd, wide, far=not off_map, reach=reach, search=search)
+        bound = _Bound(prior, sd, h.loose_m, h.loose_dir) if bounded else None
+        pose, score, loose = self._match(points, prior, sd, wide, far=not off_map, bound=bound, search=search)
         jump = se2_between(prior, pose)
         if h is self.committed and score >= self._poor() and (
                 abs(jump[0]) > WINDOW[0] or abs(jump[1]) > WINDOW[1] or abs(jump[2]) > WINDOW[2]):
@@ -333,6 +348,12 @@ class MapLocalizer:
                 self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
         coasting, h.coasting = h.coasting, 0
         if score >= self._poor():
+            if loose is None:
+                h.loose_m, h.loose_dir = 0.0, None
+            elif h is self.committed and odom is not None and h.anchor is not None:
+                # along a corridor the map does not fix the position: there it stays as loose as the motion made it
+                h.loose_m += float(np.hypot(*se2_between(h.anchor[1], odom)[:2]))
+                h.loose_dir = loose
             h.pose, h.misses, h.unbroken = pose, 0, True
             h.matched.add(index)
             h.anchor = None if odom is None else (pose.copy(), odom.copy())
@@ -374,14 +395,14 @@ class MapLocalizer:
         return h.pose.copy(), None
 
     def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None,
-               wide: bool = False, far: bool = True, reach: np.ndarray | None = None,
-               search: bool = True) -> tuple[np.ndarray, float]:
+               wide: bool = False, far: bool = True, bound: _Bound | None = None,
+               search: bool = True) -> _Fit:
         """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
         its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
         when the motion is unknown, or when NDT's result is poor or far from the prior; a wide local search
         (LOCAL_WINDOW) when that is poor too and ``far`` (not for a scan off the map), or first with ``wide``.
-        ``reach`` (3,): how far from the prior (its frame) the robot can be, when the motion went on unbroken
-        since the last good match: nothing beyond is searched or taken. Not ``search``: NDT held by the
+        ``bound``: where the robot can be when the motion went on unbroken since the last good match: nothing
+        beyond is searched or taken. Not ``search``: NDT held by the
         prior alone."""
         held = None
         if sd is not None and not wide:
@@ -389,14 +410,14 @@ class MapLocalizer:
             if _near(prior, held[0], NDT_JUMP, inclusive=True):
                 if held[1] >= self._poor():
                     return held
-            elif held[1] < self._far_needed(sd) or (reach is not None and not _within(prior, held[0], reach)):
+            elif held[1] < self._far_needed(sd) or (bound is not None and not bound.holds(held[0])):
                 # NDT slid away, and nothing says the motion was wrong
-                held = (prior.copy(), self.fine.score(points, prior))
+                held = _Fit(prior.copy(), self.fine.score(points, prior), None)
         best = held
         windows = (LOCAL_WINDOW,) if wide else (WINDOW, LOCAL_WINDOW) if far else (WINDOW,)
-        if reach is not None:
-            bounded = tuple(np.minimum(LOCAL_WINDOW, reach))
-            windows = (WINDOW,) if np.all(np.asarray(bounded) <= WINDOW) else (WINDOW, bounded)
+        if bound is not None:
+            reach = tuple(np.minimum(LOCAL_WINDOW, bound.reach()))
+            windows = (WINDOW,) if np.all(np.asarray(reach) <= WINDOW) else (WINDOW, reach)
         if not search:
             windows = ()
         for window in windows:
@@ -407,7 +428,7 @@ class MapLocalizer:
             # clearly say the motion was wrong (not merely a map missing what it sees there), and match as well as
             # the robot typically does; against a known motion, as a fix must (FIX_SCORE).
             explained = window is WINDOW if sd is None else _near(prior, searched[0], NDT_JUMP, inclusive=True)
-            if reach is not None and not _within(prior, searched[0], reach):
+            if bound is not None and not bound.holds(searched[0]):
                 continue
             needed, margin = (self._poor(), 0.0) if explained else (self._far_needed(sd), SWITCH_MARGIN)
             if searched[1] >= needed and (best is None or searched[1] >= best[1] + margin):
@@ -421,14 +442,20 @@ class MapLocalizer:
         return max(self._poor() if sd is None else FIX_SCORE, RECOVER_RATIO * self._typical())
 
     def _refine(self, points: np.ndarray, start: np.ndarray, prior: np.ndarray | None = None,
-                sd: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-        """NDT against the map from ``start`` (a MAP estimate with the Gaussian ``prior``/``sd`` when given) and
-        the raster's score there; the start is kept when NDT lands clearly worse (it diverged)."""
+                sd: np.ndarray | None = None) -> _Fit:
+        """NDT against the map from ``start`` (a MAP estimate with the Gaussian ``prior``/``sd`` when given): the
+        pose, the raster's score there, and the direction the map does not fix the position in (the weak direction
+        of NDT's translational Hessian: along a bare corridor), if any; the start is kept when NDT lands clearly
+        worse (it diverged)."""
         information = None if prior is None else (prior, 8.0 * len(points) * PRIOR_WEIGHT_DEFAULT * np.diag(1.0 / sd**2))
         result = match_scans(points, self.ndt, initial_pose=start, prior=information)
         refined = np.asarray(result.pose, dtype=np.float64)
         score, before = self.fine.score(points, refined), self.fine.score(points, start)
-        return (refined, score) if score >= before - DIVERGED_SCORE else (start, before)
+        if score < before - DIVERGED_SCORE:
+            return _Fit(start, before, None)
+        values, vectors = np.linalg.eigh(0.5 * (result.hessian[:2, :2] + result.hessian[:2, :2].T))
+        loose = None if values[1] > 0 and values[0] >= CONSTRAINED_RATIO * values[1] else vectors[:, 0]
+        return _Fit(refined, score, loose)
 
     def through_walls(self, points: np.ndarray, pose: np.ndarray) -> float:
         """The share of the scan's beams (``points`` (M, 2) their returns in the base frame, from ``sensor_xy``)
@@ -474,9 +501,33 @@ class MapLocalizer:
         return float(np.median(self.typical)) if self.typical else 0.0
 
 
-def _within(prior: np.ndarray, pose: np.ndarray, reach: np.ndarray) -> bool:
-    """Is ``pose`` within ``reach`` (3,) of ``prior``, in the prior's frame (x, y, theta)?"""
-    return bool(np.all(np.abs(se2_between(prior, pose)) <= reach))
+class _Bound(NamedTuple):
+    """Where a robot whose motion went on unbroken since its last good match can be: within BOUND_SIGMAS of the
+    ``prior`` [x, y, theta] with standard deviations ``sd`` (3,), widened along ``loose_dir`` (unit, map frame: a
+    corridor the matches since did not fix the position along) by ODOM_NOISE_RATIO of the ``loose_m`` travelled."""
+
+    prior: np.ndarray
+    sd: np.ndarray
+    loose_m: float
+    loose_dir: np.ndarray | None
+
+    def covariance(self) -> np.ndarray:
+        """(2, 2) of the position, map frame (m^2)."""
+        P = self.sd[0] ** 2 * np.eye(2)
+        if self.loose_dir is not None:
+            P = P + (ODOM_NOISE_RATIO * self.loose_m) ** 2 * np.outer(self.loose_dir, self.loose_dir)
+        return P
+
+    def holds(self, pose: np.ndarray) -> bool:
+        """Is ``pose`` [x, y, theta] within the bound?"""
+        d = np.asarray(pose[:2], dtype=np.float64) - self.prior[:2]
+        turn = abs(se2_between(self.prior, pose)[2])
+        return bool(d @ np.linalg.solve(self.covariance(), d) <= BOUND_SIGMAS**2 and turn <= BOUND_SIGMAS * self.sd[2])
+
+    def reach(self) -> np.ndarray:
+        """The search window (x, y, theta half-widths, the prior's frame) that covers the bound."""
+        extent = BOUND_SIGMAS * math.sqrt(float(np.linalg.eigvalsh(self.covariance())[1]))
+        return np.array([extent, extent, BOUND_SIGMAS * self.sd[2]])
 
 
 def _near(a: np.ndarray, b: np.ndarray, tol: tuple[float, float], inclusive: bool = False) -> bool:
