@@ -33,7 +33,9 @@ hypotheses of the base's pose in the map:
   the laser odometry, matched every scan since the last good match to the ones
   before: the scene went on, so the robot was not carried away). Then it is
   within ``BOUND_SIGMAS`` of the prior's standard deviations (which grow with
-  the motion since that match), and nothing beyond is searched or taken; a
+  the motion since that match), widened along a corridor the matches since did
+  not fix the position along (``CONSTRAINED_RATIO``) by ODOM_NOISE_RATIO of the
+  path travelled, and nothing beyond is searched or taken; a
   scan the map does not explain there is no miss: the motion carries the pose
   (**unmapped**), searched around every ``SEARCH_EVERY_SCANS`` scans, until the
   map is seen again (a correction of more than ``WINDOW`` is said: 'corrected').
