@@ -33,8 +33,11 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
     The first scans are searched for over the whole map at every heading; the
     places that match are followed until the scans tell them apart (a map that
     repeats itself is said to); then each scan is matched against the map with
-    the odometry's step as its prior. A robot that is lost (kidnapped, or where
-    the map no longer fits) is searched for again, counted and shown. Last,
+    the odometry's step as its prior. While the laser odometry goes on matching
+    scan to scan, the robot is held near where it says: a scan the map does not
+    explain there (a part it saw only from afar) is carried by the motion, not
+    moved to a look-alike. A robot that is lost (kidnapped: the scans break
+    off) is searched for again, counted and shown. Last,
     the path is smoothed: the map matches and the laser odometry in one pose
     graph (GTSAM), cut where the robot was lost.
 
