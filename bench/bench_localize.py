@@ -127,28 +127,26 @@ def _reverse_rows(log: str, bag: Path, reference, slam_trajectory, tmp: Path) ->
 
 
 def _halves(bag: Path, out_dir: Path, topic: str = "/scan") -> tuple[Path, Path]:
-    """A ROS 1 bag cut in two by its scans: the first half with everything recorded before its last scan, the
-    second with everything from its first scan on (and /tf_static)."""
+    """A ROS 1 bag cut in two by its scans, in one pass: the first half with everything recorded before its last
+    scan, the second with everything from its first scan on (and /tf_static)."""
     from rosbags.rosbag1 import Reader, Writer
 
     paths = (out_dir / f"{bag.stem}_first.bag", out_dir / f"{bag.stem}_second.bag")
-    with Reader(bag) as reader:
-        total = sum(c.msgcount for c in reader.connections if c.topic == topic)
-        for n, path in enumerate(paths):
-            with Writer(path) as writer:
-                out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-                       for c in reader.connections}
-                scans = 0
-                for connection, stamp_ns, raw in reader.messages():
-                    if connection.topic == topic:
-                        scans += 1
-                        if n == 0 and scans > total // 2:
-                            break
-                        if n == 1 and scans <= total // 2:
-                            continue
-                    elif n == 1 and scans < total // 2 and connection.topic != "/tf_static":
-                        continue
-                    writer.write(out[connection.id], stamp_ns, raw)
+    with Reader(bag) as reader, Writer(paths[0]) as first, Writer(paths[1]) as second:
+        half = sum(c.msgcount for c in reader.connections if c.topic == topic) // 2
+        out = [{c.id: w.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                for c in reader.connections} for w in (first, second)]
+        scans = 0
+        for connection, stamp_ns, raw in reader.messages():
+            if connection.topic == topic:
+                scans += 1
+                into_first, into_second = scans <= half, scans > half
+            else:
+                into_first, into_second = scans <= half, scans >= half or connection.topic == "/tf_static"
+            if into_first:
+                first.write(out[0][connection.id], stamp_ns, raw)
+            if into_second:
+                second.write(out[1][connection.id], stamp_ns, raw)
     return paths
 
 

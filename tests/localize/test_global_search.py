@@ -45,13 +45,18 @@ def _room_scan(pose: np.ndarray, half: tuple[float, float], n: int = 360) -> np.
     return np.c_[r * np.cos(angles), r * np.sin(angles)]
 
 
+def _room_walls(half: tuple[float, float], step: float = 0.05) -> np.ndarray:
+    """Points (N, 2) every ``step`` along the walls of a bare room of half-sizes ``half`` (m) centred on 0."""
+    x = np.arange(-half[0], half[0] + 1e-9, step)
+    y = np.arange(-half[1], half[1] + 1e-9, step)
+    return np.r_[np.c_[x, np.full_like(x, half[1])], np.c_[x, np.full_like(x, -half[1])],
+                 np.c_[np.full_like(y, half[0]), y], np.c_[np.full_like(y, -half[0]), y]]
+
+
 def test_a_symmetric_room_gives_both_places() -> None:
     """A bare 10 m x 6 m room looks the same turned by 180 degrees: both places come back, scoring alike."""
     half = (5.0, 3.0)
-    x = np.arange(-half[0], half[0] + 1e-9, 0.05)
-    y = np.arange(-half[1], half[1] + 1e-9, 0.05)
-    walls = np.r_[np.c_[x, np.full_like(x, half[1])], np.c_[x, np.full_like(x, -half[1])],
-                  np.c_[np.full_like(y, half[0]), y], np.c_[np.full_like(y, -half[0]), y]]
+    walls = _room_walls(half)
     truth = np.array([2.0, 1.0, 0.3])
     hyps = GlobalLocalizer(walls).search(_room_scan(truth, half))
     assert len(hyps) >= 2 and hyps[1].score > 0.95 * hyps[0].score, hyps

@@ -19,7 +19,7 @@ from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from bench.bench_localize import scan_sequence
-from tests.localize.test_global_search import _room_scan
+from tests.localize.test_global_search import _room_scan, _room_walls
 
 
 @pytest.fixture(scope="module")
@@ -95,11 +95,7 @@ def test_a_kidnapped_robot_is_lost_and_recovered_within_three_seconds(world: dic
 def test_a_map_that_repeats_itself_stays_ambiguous_until_the_scans_tell_the_places_apart() -> None:
     """A bare 10 m x 6 m room is the same turned by 180 degrees: no fix, however long the robot drives."""
     half = (5.0, 3.0)
-    x = np.arange(-half[0], half[0] + 1e-9, 0.05)
-    y = np.arange(-half[1], half[1] + 1e-9, 0.05)
-    walls = np.r_[np.c_[x, np.full_like(x, half[1])], np.c_[x, np.full_like(x, -half[1])],
-                  np.c_[np.full_like(y, half[0]), y], np.c_[np.full_like(y, -half[0]), y]]
-    localizer = MapLocalizer(walls, 0.05)
+    localizer = MapLocalizer(_room_walls(half), 0.05)
     states = []
     for k in range(15):
         pose = np.array([1.0 + 0.1 * k, 0.5, 0.3])
