@@ -155,7 +155,8 @@ class LocalizePipeline:
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,
                                      None if self.options.initial_pose is None else np.array(self.options.initial_pose),
-                                     sensor_xy=tuple(inputs.T_base_scan[:2, 3]), known=nav2_map.known)
+                                     sensor_xy=tuple(inputs.T_base_scan[:2, 3]), known=nav2_map.known,
+                                     wall_faces=nav2_map.wall_faces())
         except ValueError as err:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
         t0 = time.perf_counter()

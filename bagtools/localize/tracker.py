@@ -182,17 +182,21 @@ class MapLocalizer:
         sensor_xy: where the laser sits on the base (m): the beams' origin.
         known: map-frame places (N, 2) -> (N,) bool, whether the map knows them (e.g. :meth:`Nav2Map.known`):
             where most of a scan falls on unknown cells, a poor match is the map's gap, not a loss.
+        wall_faces: (K, 2) where the map's walls face its free space (:meth:`Nav2Map.wall_faces`), map frame:
+            what NDT matches the scans to (the rasters keep ``map_points``); None: ``map_points``.
     """
 
     def __init__(self, map_points: np.ndarray, resolution_m: float = 0.05,
                  initial_pose: np.ndarray | None = None, sensor_xy: tuple[float, float] = (0.0, 0.0),
-                 known: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 known: Callable[[np.ndarray], np.ndarray] | None = None,
+                 wall_faces: np.ndarray | None = None) -> None:
         self.search = GlobalLocalizer(map_points, fine_m=resolution_m)
         self.fine = self.search.fine
         self.occupied = self.fine.raster == RASTER_MAX  # the cells that hold a map point
         self.sensor_xy = np.asarray(sensor_xy, dtype=np.float64)
         self.known = known
-        self.ndt = NdtReference.from_points(map_points, cell_size=NDT_CELL_M, cell_model="widened")
+        self.ndt = NdtReference.from_points(map_points if wall_faces is None else wall_faces, cell_size=NDT_CELL_M,
+                                            cell_model="widened")
         self.hypotheses: list[_Hypothesis] = []
         self.committed: _Hypothesis | None = None
         self.poses: dict[int, np.ndarray] = {}  # scan index -> map pose, once known

@@ -196,3 +196,30 @@ print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024.0)
 """
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert float(out.stdout.strip()) < 500.0, out.stdout
+
+
+def test_wall_faces_are_the_borders_of_occupied_and_free_cells(tmp_path):
+    """A 4 x 3 image (row 0 at the top; F free, U unknown, O occupied), origin [1, 2, 90 degrees], 0.5 m cells:
+
+        F U O O
+        F O U O
+        F F F F
+
+    Each occupied cell gives the midpoint of each side it shares with a free cell (not with an unknown one, nor
+    the image's edge), and one with no free neighbour its centre."""
+    pixels = np.full((3, 4), 254, dtype=np.uint8)
+    pixels[0, 1] = pixels[1, 2] = 205
+    pixels[0, 2] = pixels[0, 3] = pixels[1, 1] = pixels[1, 3] = 0
+    (tmp_path / "m.pgm").write_bytes(b"P5\n4 3\n255\n" + pixels.tobytes())
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 0.5\norigin: [1.0, 2.0, 1.5707963267948966]\n"
+                                     "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    faces = read_nav2_map(tmp_path / "m.yaml").wall_faces()
+
+    def place(u: float, v: float) -> list[float]:  # u columns from the image's left edge, v rows from its top
+        x, y = u * 0.5, (3 - v) * 0.5
+        return [1.0 - y, 2.0 + x]  # turned by 90 degrees about the origin
+
+    expected = [place(1.0, 1.5), place(1.5, 2.0),  # row 1, column 1: its left and lower sides
+                place(3.5, 2.0),  # row 1, column 3: its lower side
+                place(2.5, 0.5), place(3.5, 0.5)]  # row 0, columns 2 and 3: no free neighbour
+    assert sorted(map(tuple, np.round(faces, 9))) == sorted(map(tuple, np.round(expected, 9)))
