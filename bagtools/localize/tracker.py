@@ -22,8 +22,12 @@ hypotheses of the base's pose in the map:
 - **tracking**: each scan matched against the map (not against the previous
   scan), from the last good pose moved by the odometry since (or, without
   odometry, by the velocity of the last half second of good matches): NDT on
-  the map's normal distributions held by that prior, a correlative window
-  search when NDT's result is poor or far from the prior, and a wide local
+  the map's normal distributions held by that prior (matched to where the
+  map's walls face its free space), a correlative window search when NDT's
+  result is poor or far from the prior, or scores under ``CHECK_RATIO`` of the
+  typical score (along a corridor the prior holds NDT wherever a drifting
+  motion put it: the window's pose is taken when it scores ``CHECK_MARGIN``
+  more, as the robot typically matches and as a fix must), and a wide local
   search (a fast turn, an odometry glitch) when that is poor too. A better
   match where the motion can have taken the robot (``NDT_JUMP``) is taken; one
   anywhere else must beat the motion's by ``SWITCH_MARGIN`` and score as a fix
@@ -88,8 +92,8 @@ LOST_RATIO = 0.35
 LOST_SCANS = 3
 #: No score under this is a match, whatever is typical.
 MIN_SCORE = 0.15
-#: Scores kept for the typical score.
-TYPICAL_SCANS = 50
+#: Scores kept for the typical score, and for the usual one (over a longer span: see MapLocalizer._usual).
+TYPICAL_SCANS, USUAL_SCANS = 50, 1000
 #: The window searched around the prior when the motion is unknown or NDT's result is poor (m, m, rad), and
 #: the wide local window searched when that fails too (a fast turn, an odometry glitch) before a scan is a miss.
 WINDOW = (0.5, 0.5, 0.4)
@@ -110,6 +114,9 @@ CONSTRAINED_RATIO = 0.05
 NDT_JUMP = (0.25, 0.15)
 #: The window search overrules the motion only when it scores this much more than NDT held by the motion.
 SWITCH_MARGIN = 0.1
+#: NDT held by the motion scoring under this share of the typical score is checked by the window search around
+#: it, whose pose is taken when it scores this much more (a drifting motion along a corridor).
+CHECK_RATIO, CHECK_MARGIN = 0.9, 0.05
 #: NDT's result is taken unless it scores this much under its start (it diverged).
 DIVERGED_SCORE = 0.05
 #: A beam passes through a wall when an occupied cell lies on it short of this distance (m) before its return.
@@ -205,6 +212,7 @@ class MapLocalizer:
         self.states: list[str] = []
         self.events: list[Event] = []
         self.typical: deque[float] = deque(maxlen=TYPICAL_SCANS)
+        self.usual: deque[float] = deque(maxlen=USUAL_SCANS)  # the same scores over a longer span
         self.searches = 0
         self._next_search = 0
         self._initial = None if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
@@ -241,6 +249,7 @@ class MapLocalizer:
                 self.matched.add(index)
             if h.misses == 0 and not h.coasting:
                 self.typical.append(score)
+                self.usual.append(score)
             return UNMAPPED if h.coasting else TRACKING
         last_good = max(k for k in h.poses if k not in self._recent_misses(h, index))
         self.events.append(Event("lost", index, stamp_ns, h.poses[last_good]))
@@ -315,6 +324,7 @@ class MapLocalizer:
             return False
         self.committed, self.hypotheses = best, [best]
         self.typical.extend(best.scores)
+        self.usual.extend(best.scores)
         for (k, pose), score in zip(best.poses.items(), best.scores):  # the scans since its search, in hindsight
             self.poses[k], self.scores[k] = pose, score
         self.matched |= best.matched
@@ -414,8 +424,10 @@ class MapLocalizer:
         if sd is not None and not wide:
             held = self._refine(points, prior, prior, sd)
             if _near(prior, held[0], NDT_JUMP, inclusive=True):
-                if held[1] >= self._poor():
+                if held.score >= CHECK_RATIO * self._typical():
                     return held
+                if held.score >= self._poor():
+                    return self._checked(points, held, bound)
             elif held[1] < self._far_needed(sd) or (bound is not None and not bound.holds(held[0])):
                 # NDT slid away, and nothing says the motion was wrong
                 held = _Fit(prior.copy(), self.fine.score(points, prior), None)
@@ -442,6 +454,21 @@ class MapLocalizer:
             if best is None:
                 best = searched
         return best
+
+    def _checked(self, points: np.ndarray, held: _Fit, bound: _Bound | None) -> _Fit:
+        """NDT held by the motion matched the scan, but worse than the robot typically matches: where a map
+        does not fix the position (along a corridor) the prior holds NDT wherever the motion put it, also when
+        the motion drifts. The window search around it, refined by the scan alone, is taken when it scores
+        CHECK_MARGIN more, as the robot typically and usually matches in this map (CHECK_RATIO) and as a fix must
+        (FIX_SCORE): where the map explains the scan, not the best of a poor lot where the map saw the place only
+        from afar; within the ``bound`` (or NDT_JUMP of the held pose without one)."""
+        found = match_scans_grid(points, self.fine, initial_pose=held.pose, search_range=WINDOW)
+        if not found.ok:
+            return held
+        searched = self._refine(points, np.asarray(found.pose, dtype=np.float64))
+        inside = bound.holds(searched.pose) if bound is not None else _near(held.pose, searched.pose, NDT_JUMP)
+        needed = max(held.score + CHECK_MARGIN, CHECK_RATIO * max(self._typical(), self._usual()), FIX_SCORE)
+        return searched if inside and searched.score >= needed else held
 
     def _far_needed(self, sd: np.ndarray | None) -> float:
         """The score a pose the motion cannot explain needs (see :meth:`_match`)."""
@@ -505,6 +532,11 @@ class MapLocalizer:
 
     def _typical(self) -> float:
         return float(np.median(self.typical)) if self.typical else 0.0
+
+    def _usual(self) -> float:
+        """The median score over the last USUAL_SCANS well matched scans: how well this map explains the scans
+        where it knows the place (a stretch it saw only from afar lowers the typical score, not this)."""
+        return float(np.median(self.usual)) if self.usual else 0.0
 
 
 class _Bound(NamedTuple):
