@@ -207,15 +207,16 @@ class _Staging:
                 self._lock_fd = None
 
 
-def _staging_state(staging: Path) -> str:
-    """'live' (its owner holds the lock), 'stale' (bagtools' mark, owner gone) or 'foreign' (no mark: not ours)."""
+def _staging_state(staging: Path, prefix: str) -> str:
+    """'live' (its owner holds the lock), 'stale' (bagtools' mark, owner gone; or an interrupted creation, see
+    :func:`_interrupted_creation`) or 'foreign' (no mark: not ours)."""
     try:
         fd = os.open(staging / _LOCK_NAME, os.O_RDONLY | os.O_NOFOLLOW)
     except OSError:
-        return "foreign"
+        return "stale" if _interrupted_creation(staging, prefix) else "foreign"
     try:
         if os.read(fd, len(_LOCK_MARK)) != _LOCK_MARK:
-            return "foreign"
+            return "stale" if _interrupted_creation(staging, prefix) else "foreign"
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as err:
         if err.errno in (errno.EWOULDBLOCK, errno.EAGAIN):
@@ -224,6 +225,29 @@ def _staging_state(staging: Path) -> str:
     finally:
         os.close(fd)
     return "stale"
+
+
+def _interrupted_creation(staging: Path, prefix: str) -> bool:
+    """Is ``staging`` (named ``<prefix><pid>.<random>.tmp``, without bagtools' mark) one whose creation was cut
+    short (SIGKILL between making the directory and writing its mark)? Then it holds nothing but, perhaps, a part
+    of the mark, and the process its name gives is gone."""
+    try:
+        entries = list(staging.iterdir())
+        if entries and ([e.name for e in entries] != [_LOCK_NAME] or not _LOCK_MARK.startswith(
+                entries[0].read_bytes()) or entries[0].is_symlink()):
+            return False
+    except OSError:
+        return False
+    pid = staging.name[len(prefix):].split(".", 1)[0]
+    if not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # alive, another user's
+        return False
+    return False
 
 
 def sweep_stale_staging(parent: Path, prefix: str) -> list[Path]:
@@ -237,7 +261,7 @@ def sweep_stale_staging(parent: Path, prefix: str) -> list[Path]:
     for staging in candidates:
         if not staging.is_dir() or staging.is_symlink():
             continue
-        state = _staging_state(staging)
+        state = _staging_state(staging, prefix)
         if state == "live":
             live.append(staging)
         elif state == "stale":

@@ -161,3 +161,27 @@ def test_cannot_create_output_is_one_line_error(tmp_path: Path) -> None:
         write_text_atomic(blocker / "a.csv", "x")
     with pytest.raises(BagtoolsError):
         write_text_atomic("/proc/bagtools-test/a.csv", "x")
+
+
+def test_staging_cut_short_by_sigkill_before_its_mark_is_swept_and_nothing_else(tmp_path: Path) -> None:
+    """SIGKILL between making a staging directory and writing its mark leaves an unmarked directory: the next run
+    removes it when its owner (the pid in its name) is gone and it holds nothing but part of the mark; one with
+    anything else in it, or whose owner still runs, is left alone."""
+    import os
+    import subprocess
+    import sys
+
+    from bagtools.outputs import _LOCK_MARK, _LOCK_NAME, sweep_stale_staging
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)
+    empty = tmp_path / f".sim.{dead}.aaaa.tmp"
+    partial = tmp_path / f".sim.{dead}.bbbb.tmp"
+    holding = tmp_path / f".sim.{dead}.cccc.tmp"
+    running = tmp_path / f".sim.{os.getpid()}.dddd.tmp"
+    for d in (empty, partial, holding, running):
+        d.mkdir()
+    (partial / _LOCK_NAME).write_bytes(_LOCK_MARK[:10])
+    (holding / "user.txt").write_text("not ours to remove")
+    assert sweep_stale_staging(tmp_path, ".sim.") == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([holding.name, running.name])
