@@ -233,8 +233,8 @@ def _interrupted_creation(staging: Path, prefix: str) -> bool:
     of the mark, and the process its name gives is gone."""
     try:
         entries = list(staging.iterdir())
-        if entries and ([e.name for e in entries] != [_LOCK_NAME] or not _LOCK_MARK.startswith(
-                entries[0].read_bytes()) or entries[0].is_symlink()):
+        if entries and ([e.name for e in entries] != [_LOCK_NAME] or entries[0].is_symlink()
+                        or not _LOCK_MARK.startswith(entries[0].read_bytes())):
             return False
     except OSError:
         return False
@@ -252,7 +252,8 @@ def _interrupted_creation(staging: Path, prefix: str) -> bool:
 
 def sweep_stale_staging(parent: Path, prefix: str) -> list[Path]:
     """Remove bagtools' staging directories ``parent/<prefix>*.tmp`` whose owner process is gone; return the
-    live ones. A directory of that name without bagtools' mark is left alone."""
+    live ones. A directory of that name without bagtools' mark is left alone, unless it is one whose creation
+    was cut short (:func:`_interrupted_creation`: empty but for part of the mark, its owner gone)."""
     live: list[Path] = []
     try:
         candidates = [p for p in parent.iterdir() if p.name.startswith(prefix) and p.name.endswith(_STAGING_SUFFIX)]

@@ -27,8 +27,8 @@ hypotheses of the base's pose in the map:
   result is poor or far from the prior, or scores under ``CHECK_RATIO`` of the
   typical score (along a corridor the prior holds NDT wherever a drifting
   motion put it: the window's pose is taken when it scores ``CHECK_MARGIN``
-  more, as the robot typically matches and as a fix must), and a wide local
-  search (a fast turn, an odometry glitch) when that is poor too. A better
+  more, as the robot typically and usually matches and as a fix must), and a
+  wide local search (a fast turn, an odometry glitch) when that is poor too. A better
   match where the motion can have taken the robot (``NDT_JUMP``) is taken; one
   anywhere else must beat the motion's by ``SWITCH_MARGIN`` and score as a fix
   must (``FIX_SCORE``, and ``RECOVER_RATIO`` of the typical score): a map that
