@@ -117,6 +117,8 @@ SWITCH_MARGIN = 0.1
 #: NDT held by the motion scoring under this share of the typical score is checked by the window search around
 #: it, whose pose is taken when it scores this much more (a drifting motion along a corridor).
 CHECK_RATIO, CHECK_MARGIN = 0.9, 0.05
+#: The window searches' rotation step at most (rad): a scan of near returns only still turns in steps this fine.
+MAX_ANGULAR_STEP = 0.05
 #: NDT's result is taken unless it scores this much under its start (it diverged).
 DIVERGED_SCORE = 0.05
 #: A beam passes through a wall when an occupied cell lies on it short of this distance (m) before its return.
@@ -462,13 +464,22 @@ class MapLocalizer:
         CHECK_MARGIN more, as the robot typically and usually matches in this map (CHECK_RATIO) and as a fix must
         (FIX_SCORE): where the map explains the scan, not the best of a poor lot where the map saw the place only
         from afar; within the ``bound`` (or NDT_JUMP of the held pose without one)."""
-        found = match_scans_grid(points, self.fine, initial_pose=held.pose, search_range=WINDOW)
+        found = self._window_search(points, held.pose, WINDOW)
         if not found.ok:
             return held
         searched = self._refine(points, np.asarray(found.pose, dtype=np.float64))
         inside = bound.holds(searched.pose) if bound is not None else _near(held.pose, searched.pose, NDT_JUMP)
         needed = max(held.score + CHECK_MARGIN, CHECK_RATIO * max(self._typical(), self._usual()), FIX_SCORE)
         return searched if inside and searched.score >= needed else held
+
+    def _window_search(self, points: np.ndarray, centre: np.ndarray, window: tuple[float, float, float]):
+        """The correlative search of ``window`` around ``centre``, its rotation step the angle that moves the
+        scan's median return by one cell (NDT refines what the step leaves): the farthest return's, the
+        search's own default, takes several times the headings for nothing."""
+        ranges = np.hypot(points[:, 0], points[:, 1])
+        step = self.fine.resolution_m / max(float(np.median(ranges)), self.fine.resolution_m) if len(ranges) else None
+        return match_scans_grid(points, self.fine, initial_pose=centre, search_range=window,
+                                angular_resolution_rad=None if step is None else min(step, MAX_ANGULAR_STEP))
 
     def _far_needed(self, sd: np.ndarray | None) -> float:
         """The score a pose the motion cannot explain needs (see :meth:`_match`)."""
