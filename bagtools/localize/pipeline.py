@@ -4,7 +4,8 @@
         _read()           the map; the scans, their order and odometry, as ndt-odom reads them
         _localize()       the laser odometry (ndt-odom's front end, with the wheels when used) as the motion,
                           every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track;
-                          then the tracked poses smoothed with the laser odometry (bagtools.localize.smoother)
+                          then the tracked poses smoothed with the laser odometry and the revisits (a place seen
+                          again, matched scans to scans) in one pose graph (bagtools.localize.smoother)
         _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
         _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
         _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
@@ -25,7 +26,7 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import open_bag
-from bagtools.localize.smoother import smooth_track
+from bagtools.localize.smoother import revisit_factors, smooth_track
 from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
@@ -98,6 +99,7 @@ class LocalizePipeline:
         self.options = options or LocalizeOptions()
         self.keep_scans = keep_scans
         self.warnings: list[str] = []
+        self.revisits = 0  # revisit factors the smoother joined (bagtools.localize.smoother.revisit_factors)
 
     def run(self) -> LocalizeResult:
         nav2_map = read_nav2_map(self.map_yaml)
@@ -149,7 +151,7 @@ class LocalizePipeline:
                   inputs: ScanInputs) -> tuple[MapLocalizer, dict[int, np.ndarray], float]:
         """Every scan, in recording order, through the localizer, its motion prior the laser odometry (ndt-odom's
         front end: the scans matched to each other, with the wheel odometry when the bag has it and used), then
-        the tracked poses smoothed with that odometry (unless not ``smooth``); returns the localizer, the poses
+        the tracked poses smoothed with that odometry and the revisits (unless not ``smooth``); returns the localizer, the poses
         (step in recording order -> [x, y, theta] in the map) and the seconds it all took."""
         points = nav2_map.occupied_points()
         try:
@@ -167,8 +169,10 @@ class LocalizePipeline:
                            continuous=front.run.steps[step].trusted)
         poses = localizer.poses
         if self.options.smooth:
+            revisits = revisit_factors(front.run.steps, localizer.poses)
+            self.revisits = len(revisits)
             poses = smooth_track(front.run.steps, localizer.poses, localizer.matched,
-                                 cuts=[e.index for e in localizer.events if e.kind == "lost"])
+                                 cuts=[e.index for e in localizer.events if e.kind == "lost"], revisits=revisits)
         return localizer, poses, time.perf_counter() - t0
 
     def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
@@ -219,6 +223,7 @@ class LocalizePipeline:
             "global_searches": localizer.searches,
             "odometry_used": result.map_to_odom is not None,
             "smoothed": self.options.smooth,
+            "revisits": self.revisits,
             "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
             "per_scan": {"stamp_ns": [int(s) for s in stamps], "state": [str(s) for s in result.states],
                          "score": [round(float(s), 4) for s in result.scores]},

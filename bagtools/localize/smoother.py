@@ -1,4 +1,4 @@
-"""The tracked poses smoothed offline: map matches and laser odometry in one pose graph (GTSAM).
+"""The tracked poses smoothed offline: map matches, laser odometry and revisits in one pose graph (GTSAM).
 
 The tracker places each scan alone against the map. Its poses carry the map
 match's noise (the raster's cells, walls the map draws a little elsewhere),
@@ -13,7 +13,17 @@ frozen map):
   against its keyframe, with the matcher's covariance), Gaussian;
 - prior factors: the scans matched well on the map (not carried by the
   motion), at the tracker's pose with ``MAP_SIGMA``, under a Cauchy kernel:
-  a match the motion contradicts pulls with a bounded force.
+  a match the motion contradicts pulls with a bounded force;
+- revisit factors (:func:`revisit_factors`): a keyframe the map places
+  within ``REVISIT_RADIUS_M`` of an older keyframe, at least slam's
+  ``min_travel_m`` of path later, matched against the scans around the older
+  one as slam closes a loop (:class:`~bagtools.slam.constraints.LoopClosureSearch`,
+  slam's defaults), in a window of ``REVISIT_GATE_SIGMAS`` x ``REVISIT_SIGMA``
+  around where the map puts it, under the same kernel. The map alone places
+  two visits of a place apart by its own errors, which differ with the
+  direction the place is seen from (a raytraced map's walls lie a little
+  behind what the laser saw, so two visits in opposite directions disagree by
+  twice that); the scans themselves do not.
 
 The graph is cut where the tracker lost the robot (a kidnap, or the scans put
 it where its motion could not take it): the stretches on either side are
@@ -26,6 +36,7 @@ end's, in recording order, indexed like the tracker's scans.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Sequence
 
 import gtsam
@@ -34,6 +45,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bagtools.ndtodom.steps import ScanStep
+from bagtools.slam.backend import UNLINKED_COVARIANCE
+from bagtools.slam.constraints import LoopClosureSearch, LoopOptions
 from bagtools.slam.graph import check_covariance
 from bagtools.transforms import se2_between
 
@@ -49,15 +62,64 @@ ODOMETRY_DRIFT = (0.02, 0.01)
 MAP_KERNEL = 2.0
 
 
+#: A keyframe whose map pose lies this close (m) to an older keyframe's, at least LoopOptions.min_travel_m of path
+#: later, is a revisit: matched against the scans around the older one, as slam closes a loop.
+REVISIT_RADIUS_M = 1.0
+#: How well the map places two keyframes relative to each other (m, rad): the revisit's search window.
+REVISIT_SIGMA = (0.1, 0.05)
+#: A revisit match further than this many REVISIT_SIGMA from where the map puts it is not joined.
+REVISIT_GATE_SIGMAS = 3.0
+
+
+def revisit_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],
+                    options: LoopOptions | None = None) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+    """(a, b, T_a_b, covariance) of the tracked keyframes ``b`` that see the place of an older keyframe ``a``
+    again (scan indexes; T_a_b [x, y, theta] of b's base in a's, m and rad), matched scans to scans (slam's loop
+    match, :class:`LoopClosureSearch`: ``a`` and its neighbours against ``b`` and its predecessors, placed by the
+    front end's poses) in a window around where the map ``poses`` put them: two visits of a place tied by what
+    the laser saw, not by the map's raster. At most ``options.max_candidates`` older passes per keyframe."""
+    options = dataclasses.replace(options or LoopOptions(), search_radius_m=REVISIT_RADIUS_M)
+    keys = [i for i, s in enumerate(steps) if (s.keyframe or i == 0) and i in poses]
+    if len(keys) < 2:
+        return []
+    front = np.array([np.asarray(steps[i].pose, dtype=np.float64) for i in keys])  # the laser odometry's: local maps
+    where = np.array([np.asarray(poses[i], dtype=np.float64) for i in keys])  # the map's
+    search = LoopClosureSearch(options)
+    for n, i in enumerate(keys):
+        motion = None if n == 0 else se2_between(front[n - 1], front[n])
+        try:
+            covariance = None if n == 0 else check_covariance(steps[i].covariance, f"scan {i}")
+        except ValueError:
+            covariance = UNLINKED_COVARIANCE
+        search.add_keyframe(steps[i].points_base, motion, covariance)
+    factors = []
+    gate = REVISIT_GATE_SIGMAS * np.asarray(REVISIT_SIGMA)
+    sure = np.zeros(len(keys))  # the map places every keyframe: no drift widens the reach
+    for b in range(len(keys)):
+        for a in search.candidates(b, where, sure, []):
+            guess = se2_between(where[a], where[b])
+            cand = search.match(a, b, front, REVISIT_SIGMA, guess=guess)
+            if cand.T_old_new is None:
+                continue
+            off = se2_between(guess, cand.T_old_new)
+            if np.hypot(off[0], off[1]) <= gate[0] and abs(off[2]) <= gate[1]:
+                factors.append((keys[a], keys[b], np.asarray(cand.T_old_new, dtype=np.float64), cand.covariance))
+    return factors
+
+
 def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched: Iterable[int],
-                 cuts: Iterable[int] = ()) -> dict[int, np.ndarray]:
+                 cuts: Iterable[int] = (), revisits: Sequence[tuple[int, int, np.ndarray, np.ndarray]] = ()
+                 ) -> dict[int, np.ndarray]:
     """Smoothed map poses of the tracked scans (see the module docstring).
 
     Args:
         steps: the front end's steps, one per scan, in recording order.
         poses: scan index -> [x, y, theta] of the base in the map (the tracker's).
         matched: the scans of ``poses`` placed by a good map match (prior factors).
-        cuts: scan indexes where the robot was lost: no factor joins a scan before one to a scan at or after it.
+        cuts: scan indexes where the robot was lost: no odometry factor joins a scan before one to a scan at or
+            after it.
+        revisits: (a, b, T_a_b, covariance) between tracked scans (:func:`revisit_factors`), across cuts too
+            (both ends are placed in the map).
     Returns:
         scan index -> smoothed [x, y, theta], for every scan of ``poses``.
     """
@@ -82,6 +144,10 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
     for i, j, T, covariance in between:
         if i in keep:
             graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), gtsam.noiseModel.Gaussian.Covariance(covariance)))
+    for i, j, T, covariance in revisits:
+        if i in keep and j in keep:
+            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL), gtsam.noiseModel.Gaussian.Covariance(covariance))))
     noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL),
                                            gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA)))
     for k in matched:

@@ -1,13 +1,15 @@
 """The tracked poses smoothed with the laser odometry: the map matches' noise averaged out, a wrong match held
-by the motion, a kidnap not smoothed over, a stretch with no map match left as tracked."""
+by the motion, a kidnap not smoothed over, a stretch with no map match left as tracked, two visits of a place
+tied by their scans."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from bagtools.localize.smoother import smooth_track
+from bagtools.localize.smoother import revisit_factors, smooth_track
 from bagtools.ndtodom.steps import ScanStep
 from bagtools.transforms import se2_between, se2_compose
+from bagtools_simulate.world import World
 
 COV = np.diag([1e-4, 1e-4, 3e-5])
 
@@ -76,3 +78,72 @@ def test_a_stretch_with_no_map_match_keeps_the_tracked_poses() -> None:
     for k in range(30, 60):
         np.testing.assert_array_equal(smoothed[k], tracked[k])
     assert smooth_track(steps, {}, matched=()) == {}
+
+
+def _out_and_back() -> tuple[np.ndarray, list[np.ndarray]]:
+    """A robot driving 10 m down a room with boxes along its walls and back (base poses, map frame), and its
+    360-degree scans (points in the base frame, 1 cm noise)."""
+    def box(x0: float, y0: float, x1: float, y1: float) -> dict:
+        return {"vertices": [[x0, y0], [x1, y0], [x1, y1], [x0, y1]], "z": [0.0, 1.0]}
+
+    polygons = [box(-2.0, 2.0, 13.0, 2.2), box(-2.0, -2.2, 13.0, -2.0), box(-2.2, -2.2, -2.0, 2.2),
+                box(13.0, -2.2, 13.2, 2.2)]
+    for x, y in ((0.5, 1.6), (2.3, -2.0), (3.9, 1.5), (5.2, -1.7), (7.4, 1.7), (8.8, -2.0), (10.6, 1.4)):
+        polygons.append(box(x, y, x + 0.4, y + 0.4))
+    world = World.from_dict({"name": "room", "polygons": polygons, "spawn": {"x": 0.0, "y": 0.0, "yaw": 0.0}})
+    out = [np.array([0.1 * k, -0.3, 0.0]) for k in range(100)]
+    turn = [np.array([10.0, -0.3 + 0.6 * k / 20, np.pi * k / 20]) for k in range(1, 21)]
+    back = [np.array([10.0 - 0.1 * k, 0.3, np.pi]) for k in range(1, 100)]
+    truth = np.array(out + turn + back)
+    rng = np.random.default_rng(7)
+    angles = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    scans = []
+    for pose in truth:
+        ranges = world.raycast_2d(pose[:2], pose[2] + angles, 0.2, 10.0)
+        seen = np.isfinite(ranges)
+        r = ranges[seen] + rng.normal(0.0, 0.01, np.count_nonzero(seen))
+        scans.append(np.c_[r * np.cos(angles[seen]), r * np.sin(angles[seen])])
+    return truth, scans
+
+
+def test_revisits_tie_two_visits_of_a_place_by_their_scans_not_by_the_map() -> None:
+    """Out and back along a room: the map places the robot 3 cm ahead of where it is, both ways (a raytraced
+    map's walls lie a little behind what the laser sees), so the two visits disagree by 6 cm; the laser odometry
+    turned 2 degrees too few over the turn. The revisits, matched scans to scans, say where the visits lie
+    relative to each other, and the smoothed poses follow them."""
+    truth, scans = _out_and_back()
+    odometry = [truth[0]]
+    for k in range(1, len(truth)):
+        step = se2_between(truth[k - 1], truth[k])
+        odometry.append(se2_compose(odometry[-1], step * [1.0, 1.0, 1.0 - 0.035 * (100 <= k < 120)]))
+    steps = []
+    keyframe = 0
+    for k, (pose, points) in enumerate(zip(odometry, scans)):
+        if k == 0:
+            steps.append(ScanStep(0, pose, points, -1, np.zeros(3), COV, 1.0, "first", True))
+            continue
+        steps.append(ScanStep(k * 100_000_000, pose, points, keyframe, se2_between(odometry[keyframe], pose), COV,
+                              0.9, "ndt", k % 5 == 0))
+        keyframe = k if k % 5 == 0 else keyframe
+    tracked = {k: se2_compose(p, np.array([0.03, 0.0, 0.0])) for k, p in enumerate(truth)}
+
+    revisits = revisit_factors(steps, tracked)
+    assert len(revisits) >= 10
+    for a, b, T, _ in revisits:  # the way back sees again what the way out saw, at least 8 m of path later
+        assert a < 100 <= 120 <= b
+        off = se2_between(se2_between(truth[a], truth[b]), T)
+        assert np.hypot(off[0], off[1]) < 0.015 and abs(off[2]) < 0.005, (a, b, off)
+
+    def apart(poses: dict[int, np.ndarray]) -> float:
+        """Mean error (m) of where the revisits' pairs lie relative to each other."""
+        return float(np.mean([np.hypot(*se2_between(se2_between(truth[a], truth[b]),
+                                                    se2_between(poses[a], poses[b]))[:2]) for a, b, _, _ in revisits]))
+
+    without = smooth_track(steps, tracked, matched=set(tracked))
+    joined = smooth_track(steps, tracked, matched=set(tracked), revisits=revisits)
+    assert apart(tracked) > 0.05 and apart(without) > 0.04
+    assert apart(joined) < 0.5 * apart(without), (apart(joined), apart(without))
+    # a pair the map places where the scans do not match (a place elsewhere) gives no revisit
+    moved = {k: p + (np.array([0.6, 0.0, 0.0]) if k >= 120 else 0.0) for k, p in tracked.items()}
+    assert all(np.hypot(*se2_between(se2_between(moved[a], moved[b]), T)[:2]) < 0.3
+               for a, b, T, _ in revisit_factors(steps, moved))
