@@ -724,8 +724,13 @@ class LaserOdometry:
         """``points`` (scan ``index``, at ``pose``) and those of the ``n_keyframes`` - 1 keyframes before it
         within SUBMAP_RADIUS_M, in its base frame."""
         parts = [points]
-        earlier = [k for k in self.run.keyframe_indexes if k != index and k < index]
-        for k in reversed(earlier[-(n_keyframes - 1):] if n_keyframes > 1 else []):
+        earlier: list[int] = []  # the keyframes before it, latest first (a walk back, not a scan of every step)
+        k = min(index, len(self.run.steps)) - 1
+        while k >= 0 and len(earlier) < n_keyframes - 1:
+            if self.run.steps[k].keyframe:
+                earlier.append(k)
+            k -= 1
+        for k in earlier:
             older = self.run.steps[k]
             rel = _between(pose, older.pose)
             if np.hypot(rel[0], rel[1]) > SUBMAP_RADIUS_M:
