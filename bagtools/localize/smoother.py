@@ -45,6 +45,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bagtools.ndtodom.steps import ScanStep
+from bagtools.progress import progress
 from bagtools.slam.backend import UNLINKED_COVARIANCE
 from bagtools.slam.constraints import LoopClosureSearch, LoopOptions
 from bagtools.slam.graph import check_covariance
@@ -95,7 +96,7 @@ def revisit_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],
     factors = []
     gate = REVISIT_GATE_SIGMAS * np.asarray(REVISIT_SIGMA)
     sure = np.zeros(len(keys))  # the map places every keyframe: no drift widens the reach
-    for b in range(len(keys)):
+    for b in progress(range(len(keys)), total=len(keys), desc="revisits", unit="keyframe"):
         for a in search.candidates(b, where, sure, []):
             guess = se2_between(where[a], where[b])
             cand = search.match(a, b, front, REVISIT_SIGMA, guess=guess)
