@@ -213,8 +213,8 @@ class MapLocalizer:
         self.scores: dict[int, float] = {}
         self.states: list[str] = []
         self.events: list[Event] = []
-        self.typical: deque[float] = deque(maxlen=TYPICAL_SCANS)
-        self.usual: deque[float] = deque(maxlen=USUAL_SCANS)  # the same scores over a longer span
+        self.typical = _RecentScores(TYPICAL_SCANS)
+        self.usual = _RecentScores(USUAL_SCANS)  # the same scores over a longer span
         self.searches = 0
         self._next_search = 0
         self._initial = None if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
@@ -542,12 +542,34 @@ class MapLocalizer:
         return max(MIN_SCORE, LOST_RATIO * self._typical())
 
     def _typical(self) -> float:
-        return float(np.median(self.typical)) if self.typical else 0.0
+        return self.typical.median()
 
     def _usual(self) -> float:
         """The median score over the last USUAL_SCANS well matched scans: how well this map explains the scans
         where it knows the place (a stretch it saw only from afar lowers the typical score, not this)."""
-        return float(np.median(self.usual)) if self.usual else 0.0
+        return self.usual.median()
+
+
+class _RecentScores:
+    """The last ``n`` scores of well matched scans and their median (0.0 for none), kept until the next score:
+    the tracker asks for it several times a scan."""
+
+    def __init__(self, n: int) -> None:
+        self.values: deque[float] = deque(maxlen=n)
+        self._median: float | None = None
+
+    def append(self, score: float) -> None:
+        self.values.append(score)
+        self._median = None
+
+    def extend(self, scores: list[float]) -> None:
+        self.values.extend(scores)
+        self._median = None
+
+    def median(self) -> float:
+        if self._median is None:
+            self._median = float(np.median(self.values)) if self.values else 0.0
+        return self._median
 
 
 class _Bound(NamedTuple):
