@@ -143,7 +143,6 @@ def test_revisits_tie_two_visits_of_a_place_by_their_scans_not_by_the_map() -> N
     joined = smooth_track(steps, tracked, matched=set(tracked), revisits=revisits)
     assert apart(tracked) > 0.05 and apart(without) > 0.04
     assert apart(joined) < 0.5 * apart(without), (apart(joined), apart(without))
-    # a pair the map places where the scans do not match (a place elsewhere) gives no revisit
+    # a way back the map puts 0.6 m from where the robot drove: no window around it holds the way out's scans
     moved = {k: p + (np.array([0.6, 0.0, 0.0]) if k >= 120 else 0.0) for k, p in tracked.items()}
-    assert all(np.hypot(*se2_between(se2_between(moved[a], moved[b]), T)[:2]) < 0.3
-               for a, b, T, _ in revisit_factors(steps, moved))
+    assert revisit_factors(steps, moved) == []
