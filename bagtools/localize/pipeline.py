@@ -151,8 +151,8 @@ class LocalizePipeline:
                   inputs: ScanInputs) -> tuple[MapLocalizer, dict[int, np.ndarray], float]:
         """Every scan, in recording order, through the localizer, its motion prior the laser odometry (ndt-odom's
         front end: the scans matched to each other, with the wheel odometry when the bag has it and used), then
-        the tracked poses smoothed with that odometry and the revisits (unless not ``smooth``); returns the localizer, the poses
-        (step in recording order -> [x, y, theta] in the map) and the seconds it all took."""
+        the tracked poses smoothed with that odometry and the revisits (unless not ``smooth``); returns the
+        localizer, the poses (step in recording order -> [x, y, theta] in the map) and the seconds it all took."""
         points = nav2_map.occupied_points()
         try:
             localizer = MapLocalizer(points, nav2_map.resolution_m,

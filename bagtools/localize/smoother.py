@@ -145,12 +145,12 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
     for i, j, T, covariance in between:
         if i in keep:
             graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), gtsam.noiseModel.Gaussian.Covariance(covariance)))
+    kernel = gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL)
     for i, j, T, covariance in revisits:
         if i in keep and j in keep:
-            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), gtsam.noiseModel.Robust.Create(
-                gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL), gtsam.noiseModel.Gaussian.Covariance(covariance))))
-    noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(MAP_KERNEL),
-                                           gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA)))
+            revisit = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(covariance))
+            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), revisit))
+    noise = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA)))
     for k in matched:
         graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*poses[k]), noise))
     smoothed = {k: np.asarray(poses[k], dtype=np.float64).copy() for k in nodes}

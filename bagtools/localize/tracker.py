@@ -70,7 +70,7 @@ from typing import NamedTuple
 import numpy as np
 
 from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
-from bagtools.ndt import NdtReference, match_scans, match_scans_grid
+from bagtools.ndt import GridMatchResult, NdtReference, match_scans, match_scans_grid
 from bagtools.ndt.correlative import RASTER_MAX
 from bagtools.ndtodom.frontend import (
     CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
@@ -117,7 +117,8 @@ SWITCH_MARGIN = 0.1
 #: NDT held by the motion scoring under this share of the typical score is checked by the window search around
 #: it, whose pose is taken when it scores this much more (a drifting motion along a corridor).
 CHECK_RATIO, CHECK_MARGIN = 0.9, 0.05
-#: The window searches' rotation step at most (rad): a scan of near returns only still turns in steps this fine.
+#: The check's window search turns in steps of at most this (rad), a scan of near returns only too (see
+#: MapLocalizer._window_search).
 MAX_ANGULAR_STEP = 0.05
 #: NDT's result is taken unless it scores this much under its start (it diverged).
 DIVERGED_SCORE = 0.05
@@ -472,10 +473,12 @@ class MapLocalizer:
         needed = max(held.score + CHECK_MARGIN, CHECK_RATIO * max(self._typical(), self._usual()), FIX_SCORE)
         return searched if inside and searched.score >= needed else held
 
-    def _window_search(self, points: np.ndarray, centre: np.ndarray, window: tuple[float, float, float]):
-        """The correlative search of ``window`` around ``centre``, its rotation step the angle that moves the
-        scan's median return by one cell (NDT refines what the step leaves): the farthest return's, the
-        search's own default, takes several times the headings for nothing."""
+    def _window_search(self, points: np.ndarray, centre: np.ndarray,
+                       window: tuple[float, float, float]) -> GridMatchResult:
+        """The check's correlative search of ``window`` around ``centre``, its rotation step the angle that moves
+        the scan's median return by one cell (NDT refines what the step leaves): the farthest return's, the
+        search's own default, takes several times the headings for nothing. The searches of :meth:`_match` keep
+        the default: where the map explains little, the finer step finds what the coarser misses."""
         ranges = np.hypot(points[:, 0], points[:, 1])
         step = self.fine.resolution_m / max(float(np.median(ranges)), self.fine.resolution_m) if len(ranges) else None
         return match_scans_grid(points, self.fine, initial_pose=centre, search_range=window,
