@@ -12,8 +12,15 @@ frozen map):
 - between factors: the front end's matches (``T_ref_cur`` of each scan
   against its keyframe, with the matcher's covariance), Gaussian;
 - prior factors: the scans matched well on the map (not carried by the
-  motion), at the tracker's pose with ``MAP_SIGMA``, under a Cauchy kernel:
-  a match the motion contradicts pulls with a bounded force;
+  motion), at the tracker's pose with ``MAP_SIGMA`` per ``MAP_SPAN_M`` of
+  path, under a Cauchy kernel: a match the motion contradicts pulls with a
+  bounded force. A map match's error is the map's error at that place, the
+  same for every scan that sees it from there: a robot standing still, or
+  one recording many scans per metre, gets no surer of where it is for each
+  scan. So each prior weighs its share of MAP_SPAN_M since the matched scan
+  before it (a turn counts ``turn_m_per_rad`` per radian, as in slam's graph
+  distances); scans that far apart or more (CSAIL's, a metre apart) weigh one
+  full MAP_SIGMA each;
 - revisit factors (:func:`revisit_factors`): a keyframe the map places
   within ``REVISIT_RADIUS_M`` of an older keyframe, at least slam's
   ``min_travel_m`` of path later, matched against the scans around the older
@@ -49,12 +56,16 @@ from bagtools.progress import progress
 from bagtools.slam.backend import UNLINKED_COVARIANCE
 from bagtools.slam.constraints import LoopClosureSearch, LoopOptions
 from bagtools.slam.graph import check_covariance
-from bagtools.transforms import se2_between
+from bagtools.transforms import se2_between, wrap_to_pi
 
 #: Standard deviations (m, m, rad) of a map match's pose in the graph. The matches' errors are not independent
 #: from scan to scan (the map's own errors stay where they are), so they hold the trajectory against drift while
 #: the laser odometry shapes it. Measured on the benchmark logs in their SLAM maps (bench/RESULTS.md).
 MAP_SIGMA = (0.2, 0.2, 0.05)
+#: ... per this much of path (m): map matches closer together share their weight (see the module docstring).
+MAP_SPAN_M = 0.2
+#: A map match weighs at least this share (1 mm of MAP_SPAN_M): a robot standing still still counts its scans a little.
+MIN_MAP_SHARE = 0.005
 #: The laser odometry drifts by this much per metre of a match (m/m, rad/m), whatever its matcher's covariance
 #: says: 1 to 2 % on the benchmark logs. A bag with scans far apart (CSAIL: a scan every metre or so) leans less
 #: on its long steps.
@@ -150,9 +161,9 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
         if i in keep and j in keep:
             revisit = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(covariance))
             graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), revisit))
-    noise = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA)))
-    for k in matched:
-        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*poses[k]), noise))
+    for k, share in _map_shares(steps, matched).items():
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA) / np.sqrt(share))
+        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*poses[k]), gtsam.noiseModel.Robust.Create(kernel, noise)))
     smoothed = {k: np.asarray(poses[k], dtype=np.float64).copy() for k in nodes}
     if keep:
         params = gtsam.LevenbergMarquardtParams()
@@ -162,6 +173,19 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
             p = result.atPose2(k)
             smoothed[k] = np.array([p.x(), p.y(), p.theta()])
     return smoothed
+
+
+def _map_shares(steps: Sequence[ScanStep], matched: Iterable[int]) -> dict[int, float]:
+    """Matched scan -> the share of MAP_SPAN_M (in (0, 1]) of path since the matched scan before it (the first:
+    1), measured on the front end's poses, a turn counting LoopOptions.turn_m_per_rad per radian."""
+    keys = np.array(sorted(matched), dtype=np.int64)
+    if keys.size == 0:
+        return {}
+    pose = np.array([np.asarray(steps[k].pose, dtype=np.float64) for k in keys]).reshape(-1, 3)
+    step = np.diff(pose, axis=0)
+    path = np.hypot(step[:, 0], step[:, 1]) + LoopOptions().turn_m_per_rad * np.abs(wrap_to_pi(step[:, 2]))
+    share = np.r_[1.0, np.clip(path / MAP_SPAN_M, MIN_MAP_SHARE, 1.0)]
+    return dict(zip(keys.tolist(), share.tolist()))
 
 
 def _between_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],

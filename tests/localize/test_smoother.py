@@ -4,6 +4,8 @@ tied by their scans."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from bagtools.localize.smoother import revisit_factors, smooth_track
@@ -78,6 +80,25 @@ def test_a_stretch_with_no_map_match_keeps_the_tracked_poses() -> None:
     for k in range(30, 60):
         np.testing.assert_array_equal(smoothed[k], tracked[k])
     assert smooth_track(steps, {}, matched=()) == {}
+
+
+def test_a_robot_standing_still_gets_no_surer_of_the_map_for_each_scan(monkeypatch) -> None:
+    """120 scans driving, then 300 standing still where the map match is 5 cm off, the same 5 cm every scan (the
+    map's error at that place; the laser odometry sees no motion). Weighed per scan, the standing scans outvote
+    the drive and pull the robot there most of the way to the map's error; weighed per MAP_SPAN_M of path, they
+    count as about one scan, and the drive's matches place it."""
+    from bagtools.localize import smoother
+
+    rng = np.random.default_rng(6)
+    truth = np.vstack([_path(), np.repeat(_path()[-1:], 300, axis=0)])
+    steps = [s if k < 120 else dataclasses.replace(s, T_ref_cur=se2_between(truth[s.reference], truth[k]))
+             for k, s in enumerate(_steps(truth, rng))]
+    tracked = {k: p + rng.normal(0.0, [0.02, 0.02, 0.005]) for k, p in enumerate(truth[:120])}
+    tracked.update({k: truth[k] + np.array([0.05, 0.0, 0.0]) for k in range(120, len(truth))})
+    standing = _error(smooth_track(steps, tracked, matched=set(tracked)), truth)[120:]
+    assert standing.mean() < 0.025, standing.mean()
+    monkeypatch.setattr(smoother, "MIN_MAP_SHARE", 1.0)  # every scan a full map match
+    assert _error(smooth_track(steps, tracked, matched=set(tracked)), truth)[120:].mean() > 0.04
 
 
 def _out_and_back() -> tuple[np.ndarray, list[np.ndarray]]:
