@@ -442,7 +442,10 @@ class MapLocalizer:
         if not search:
             windows = ()
         for window in windows:
-            found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=window)
+            # A window after the first looks only for what the motion cannot explain (the first covered what it
+            # can): its search drops every pose scoring under what such a pose needs, which prunes most of it.
+            floor = self._far_needed(sd) if window is not windows[0] else 0.0
+            found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=window, min_score=floor)
             start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
             searched = self._refine(points, start, prior if sd is not None and window is WINDOW else None, sd)
             # Where the motion can have taken it (NDT_JUMP), a better match is taken. Anywhere else the scan must

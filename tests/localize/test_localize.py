@@ -369,3 +369,41 @@ def test_a_motion_that_lags_along_a_corridor_is_corrected_by_the_map(tmp_path: P
     assert errors.max() < 0.3 and errors[-1] < 0.15, errors
     monkeypatch.setattr(tracker, "CHECK_RATIO", 0.0)  # no check: NDT held by the motion is taken as it is
     assert run()[-1] > 1.0
+
+
+def test_a_wide_search_only_looks_for_poses_the_motion_cannot_explain(world: dict, monkeypatch) -> None:
+    """The wheels jump 1 m at scan 150 (a glitch; the robot did not move): NDT and the window around the odometry's
+    pose find nothing, and the wide window finds the robot where it was, at once. That search drops every pose
+    scoring under what a pose the motion cannot explain needs: the same poses as searching it all, for less work."""
+    inputs, odom, truth = scan_sequence(world["bag"])
+    nav2 = read_nav2_map(world["map"])
+    k0 = 150
+    jump = np.array([1.0, 0.0, 0.0])
+    searched = tracker.match_scans_grid
+
+    def run(floored: bool) -> tuple[MapLocalizer, int]:
+        work = []
+
+        def search(*args, **kwargs):
+            if not floored:
+                kwargs["min_score"] = 0.0
+            found = searched(*args, **kwargs)
+            work.append(found.n_evaluated)
+            return found
+
+        monkeypatch.setattr(tracker, "match_scans_grid", search)
+        localizer = MapLocalizer(nav2.occupied_points(), nav2.resolution_m)
+        for step, k in enumerate(inputs.order):
+            o = odom[k] if step < k0 else se2_compose(odom[k], jump)
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), o)
+        return localizer, sum(work)
+
+    floored, work = run(True)
+    unfloored, all_work = run(False)
+    kinds = [(e.kind, e.index) for e in floored.events]
+    assert kinds[0][0] == "fix" and ("lost", k0) in kinds and ("recovered", k0) in kinds, kinds
+    errors = [np.hypot(*(floored.poses[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order) if s in floored.poses]
+    assert max(errors) < 0.05, max(errors)
+    assert floored.poses.keys() == unfloored.poses.keys()
+    assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
+    assert work < all_work, (work, all_work)
