@@ -419,10 +419,10 @@ class MapLocalizer:
         """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
         its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
         when the motion is unknown, or when NDT's result is poor or far from the prior; a wide local search
-        (LOCAL_WINDOW) when that is poor too and ``far`` (not for a scan off the map), or first with ``wide``.
+        (LOCAL_WINDOW) when that is poor too and ``far`` (not for a scan off the map), there only for a pose the
+        motion cannot explain (scoring :meth:`_far_needed`), or first with ``wide``.
         ``bound``: where the robot can be when the motion went on unbroken since the last good match: nothing
-        beyond is searched or taken. Not ``search``: NDT held by the
-        prior alone."""
+        beyond is searched or taken. Not ``search``: NDT held by the prior alone."""
         held = None
         if sd is not None and not wide:
             held = self._refine(points, prior, prior, sd)

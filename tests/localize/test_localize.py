@@ -402,7 +402,8 @@ def test_a_wide_search_only_looks_for_poses_the_motion_cannot_explain(world: dic
     unfloored, all_work = run(False)
     kinds = [(e.kind, e.index) for e in floored.events]
     assert kinds[0][0] == "fix" and ("lost", k0) in kinds and ("recovered", k0) in kinds, kinds
-    errors = [np.hypot(*(floored.poses[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order) if s in floored.poses]
+    placed = floored.poses
+    errors = [np.hypot(*(placed[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order) if s in placed]
     assert max(errors) < 0.05, max(errors)
     assert floored.poses.keys() == unfloored.poses.keys()
     assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
