@@ -41,8 +41,10 @@ hypotheses of the base's pose in the map:
   not fix the position along (``CONSTRAINED_RATIO``) by ODOM_NOISE_RATIO of the
   path travelled, and nothing beyond is searched or taken; a
   scan the map does not explain there is no miss: the motion carries the pose
-  (**unmapped**), searched around every ``SEARCH_EVERY_SCANS`` scans, until the
-  map is seen again (a correction of more than ``WINDOW`` is said: 'corrected').
+  (**unmapped**), searched around every ``SEARCH_EVERY_SCANS`` scans (once the
+  scan moved by a map cell since a search found nothing: standing still, it
+  would see the same), until the map is seen again (a correction of more than
+  ``WINDOW`` is said: 'corrected').
   This is what holds the robot in a part of the building the map saw only from
   afar (free space, no walls), where a look-alike elsewhere matches better.
 - **lost**: otherwise (no odometry's continuity, e.g. a kidnap breaks it), a
@@ -158,6 +160,7 @@ class _Hypothesis:
     loose_m: float = 0.0  # path (m) from its last match that fixed the position in every direction to its anchor
     loose_dir: np.ndarray | None = None  # the direction (map frame) the matches since did not fix
     coasting: int = 0  # scans in a row carried by the motion (off the map, or a map lacking what it sees)
+    searched_at: np.ndarray | None = None  # odometry pose of its last search that found nothing, while carried
 
 
 class _Fit(NamedTuple):
@@ -353,8 +356,9 @@ class MapLocalizer:
         prior, sd = self._prior(h, stamp_ns, odom)
         bounded = h is self.committed and h.unbroken and self._continuous and sd is not None
         off_map = h is self.committed and sd is not None and self._mapped(points, prior) < MAPPED_SHARE
-        # Carried by an unbroken motion, the robot is searched for around the prior only every SEARCH_EVERY_SCANS.
-        search = not (bounded and h.coasting % SEARCH_EVERY_SCANS)
+        # Carried by an unbroken motion, the robot is searched for around the prior only every SEARCH_EVERY_SCANS,
+        # and only once the scan moved since a search found nothing.
+        search = not (bounded and (h.coasting % SEARCH_EVERY_SCANS or not self._moved(h.searched_at, points, odom)))
         bound = _Bound(prior, sd, h.loose_m, h.loose_dir) if bounded else None
         pose, score, loose = self._match(points, prior, sd, wide, far=not off_map, bound=bound, search=search)
         jump = se2_between(prior, pose)
@@ -366,6 +370,10 @@ class MapLocalizer:
                 self.events.append(Event("lost", index, stamp_ns, prior.copy()))
                 self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
         coasting, h.coasting = h.coasting, 0
+        if score < self._poor() and bounded:
+            h.searched_at = odom.copy() if search else h.searched_at
+        else:
+            h.searched_at = None
         if score >= self._poor():
             if loose is None:
                 h.loose_m, h.loose_dir = 0.0, None
@@ -486,6 +494,15 @@ class MapLocalizer:
         step = self.fine.resolution_m / max(float(np.median(ranges)), self.fine.resolution_m) if len(ranges) else None
         return match_scans_grid(points, self.fine, initial_pose=centre, search_range=window,
                                 angular_resolution_rad=None if step is None else min(step, MAX_ANGULAR_STEP))
+
+    def _moved(self, since: np.ndarray | None, points: np.ndarray, odom: np.ndarray) -> bool:
+        """Has the scan (``points``, base frame) moved by a map cell (its median return, odometry pose ``odom``)
+        since odometry pose ``since``? True for None."""
+        if since is None:
+            return True
+        moved = se2_between(since, odom)
+        reach = float(np.median(np.hypot(points[:, 0], points[:, 1]))) if len(points) else 0.0
+        return math.hypot(moved[0], moved[1]) + reach * abs(moved[2]) >= self.fine.resolution_m
 
     def _far_needed(self, sd: np.ndarray | None) -> float:
         """The score a pose the motion cannot explain needs (see :meth:`_match`)."""

@@ -408,3 +408,44 @@ def test_a_wide_search_only_looks_for_poses_the_motion_cannot_explain(world: dic
     assert floored.poses.keys() == unfloored.poses.keys()
     assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
     assert work < all_work, (work, all_work)
+
+
+def test_a_robot_standing_still_off_the_map_is_not_searched_for_again_and_again(world: dict, monkeypatch) -> None:
+    """The map's top third made unknown; the figure eight drives into it and stops there for 60 scans (the same
+    scan, the laser odometry continuous). A search around the motion's pose that found nothing is not repeated
+    until the scan has moved by a map cell: standing still it would see the same. Moving on, it searches again."""
+    import dataclasses
+
+    inputs, odom, _ = scan_sequence(world["bag"])
+    nav2 = read_nav2_map(world["map"])
+    occupancy = nav2.occupancy.copy()
+    y = nav2.origin[1] + (occupancy.shape[0] - np.arange(occupancy.shape[0]) - 0.5) * nav2.resolution_m
+    occupancy[y > 0.8, :] = -1
+    cut = dataclasses.replace(nav2, occupancy=occupancy)
+    searches = []
+    searched = tracker.match_scans_grid
+    monkeypatch.setattr(tracker, "match_scans_grid", lambda *a, **k: (searches.append(1), searched(*a, **k))[1])
+    localizer = MapLocalizer(cut.occupied_points(), cut.resolution_m, known=cut.known)
+    step, stamp = 0, 0
+    states = []
+    for k in inputs.order:
+        stamp = int(inputs.stamps_ns[k])
+        states.append(localizer.step(step, stamp, inputs.points_base(k), odom[k], continuous=step > 0))
+        step += 1
+        if states[-5:] == [UNMAPPED] * 5:
+            break
+    assert states[-1] == UNMAPPED and localizer.committed is not None
+    before, pose = len(searches), localizer.committed.pose.copy()
+    for _ in range(60):  # standing still where the map knows nothing
+        stamp += 100_000_000
+        assert localizer.step(step, stamp, inputs.points_base(k), odom[k], continuous=True) == UNMAPPED
+        step += 1
+    assert len(searches) - before <= 2, len(searches) - before  # without: 24 (a search every fifth scan, 2 windows)
+    assert np.allclose(localizer.committed.pose, pose)
+    later = [j for j in inputs.order if inputs.stamps_ns[j] > inputs.stamps_ns[k]][:20]
+    before = len(searches)
+    for j in later:  # driving on, deeper into what the map does not know
+        stamp += 100_000_000
+        localizer.step(step, stamp, inputs.points_base(j), odom[j], continuous=True)
+        step += 1
+    assert len(searches) > before
