@@ -196,18 +196,23 @@ def test_a_fleet_is_localized_in_one_map(world: dict, tmp_path: Path, capsys) ->
     assert err.strip().splitlines()[-1].startswith("bagtools: ") and "nowhere.yaml: map YAML not found" in err
 
 
-def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> None:
-    """The map's top third made unknown (a part of the building the map never saw): the figure eight drives into
-    it; there the scans match poorly, the motion carries the pose ('unmapped'), nothing is lost or jumps."""
+def _localizer_without_the_top_third(world: dict) -> MapLocalizer:
+    """A localizer in the world's map with its top third (y > 0.8 m) made unknown: a part the map never saw."""
     import dataclasses
 
-    inputs, odom, truth = scan_sequence(world["bag"])
     nav2 = read_nav2_map(world["map"])
     occupancy = nav2.occupancy.copy()
     y = nav2.origin[1] + (occupancy.shape[0] - np.arange(occupancy.shape[0]) - 0.5) * nav2.resolution_m
     occupancy[y > 0.8, :] = -1
     cut = dataclasses.replace(nav2, occupancy=occupancy)
-    localizer = MapLocalizer(cut.occupied_points(), cut.resolution_m, known=cut.known)
+    return MapLocalizer(cut.occupied_points(), cut.resolution_m, known=cut.known)
+
+
+def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> None:
+    """The map's top third made unknown (a part of the building the map never saw): the figure eight drives into
+    it; there the scans match poorly, the motion carries the pose ('unmapped'), nothing is lost or jumps."""
+    inputs, odom, truth = scan_sequence(world["bag"])
+    localizer = _localizer_without_the_top_third(world)
     states = [localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
               for step, k in enumerate(inputs.order)]
     assert UNMAPPED in states and [e.kind for e in localizer.events] == ["fix"]
@@ -414,18 +419,11 @@ def test_a_robot_standing_still_off_the_map_is_not_searched_for_again_and_again(
     """The map's top third made unknown; the figure eight drives into it and stops there for 60 scans (the same
     scan, the laser odometry continuous). A search around the motion's pose that found nothing is not repeated
     until the scan has moved by a map cell: standing still it would see the same. Moving on, it searches again."""
-    import dataclasses
-
     inputs, odom, _ = scan_sequence(world["bag"])
-    nav2 = read_nav2_map(world["map"])
-    occupancy = nav2.occupancy.copy()
-    y = nav2.origin[1] + (occupancy.shape[0] - np.arange(occupancy.shape[0]) - 0.5) * nav2.resolution_m
-    occupancy[y > 0.8, :] = -1
-    cut = dataclasses.replace(nav2, occupancy=occupancy)
     searches = []
     searched = tracker.match_scans_grid
     monkeypatch.setattr(tracker, "match_scans_grid", lambda *a, **k: (searches.append(1), searched(*a, **k))[1])
-    localizer = MapLocalizer(cut.occupied_points(), cut.resolution_m, known=cut.known)
+    localizer = _localizer_without_the_top_third(world)
     step, stamp = 0, 0
     states = []
     for k in inputs.order:
