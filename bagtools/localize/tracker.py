@@ -370,10 +370,10 @@ class MapLocalizer:
                 self.events.append(Event("lost", index, stamp_ns, prior.copy()))
                 self.events.append(Event("recovered", index, stamp_ns, pose.copy()))
         coasting, h.coasting = h.coasting, 0
-        if score < self._poor() and bounded:
-            h.searched_at = odom.copy() if search else h.searched_at
-        else:
+        if score >= self._poor() or not bounded:
             h.searched_at = None
+        elif search:  # found nothing: not searched again before the scan moves
+            h.searched_at = odom.copy()
         if score >= self._poor():
             if loose is None:
                 h.loose_m, h.loose_dir = 0.0, None
@@ -490,8 +490,7 @@ class MapLocalizer:
         the scan's median return by one cell (NDT refines what the step leaves): the farthest return's, the
         search's own default, takes several times the headings for nothing. The searches of :meth:`_match` keep
         the default: where the map explains little, the finer step finds what the coarser misses."""
-        ranges = np.hypot(points[:, 0], points[:, 1])
-        step = self.fine.resolution_m / max(float(np.median(ranges)), self.fine.resolution_m) if len(ranges) else None
+        step = self.fine.resolution_m / max(_median_range(points), self.fine.resolution_m) if len(points) else None
         return match_scans_grid(points, self.fine, initial_pose=centre, search_range=window,
                                 angular_resolution_rad=None if step is None else min(step, MAX_ANGULAR_STEP))
 
@@ -501,8 +500,7 @@ class MapLocalizer:
         if since is None:
             return True
         moved = se2_between(since, odom)
-        reach = float(np.median(np.hypot(points[:, 0], points[:, 1]))) if len(points) else 0.0
-        return math.hypot(moved[0], moved[1]) + reach * abs(moved[2]) >= self.fine.resolution_m
+        return math.hypot(moved[0], moved[1]) + _median_range(points) * abs(moved[2]) >= self.fine.resolution_m
 
     def _far_needed(self, sd: np.ndarray | None) -> float:
         """The score a pose the motion cannot explain needs (see :meth:`_match`)."""
@@ -622,6 +620,11 @@ class _Bound(NamedTuple):
         """The search window (x, y, theta half-widths, the prior's frame) that covers the bound."""
         extent = BOUND_SIGMAS * math.sqrt(float(np.linalg.eigvalsh(self.covariance())[1]))
         return np.array([extent, extent, BOUND_SIGMAS * self.sd[2]])
+
+
+def _median_range(points: np.ndarray) -> float:
+    """The median distance (m) of a scan's returns ((M, 2), base frame) from the base; 0.0 for none."""
+    return float(np.median(np.hypot(points[:, 0], points[:, 1]))) if len(points) else 0.0
 
 
 def _near(a: np.ndarray, b: np.ndarray, tol: tuple[float, float], inclusive: bool = False) -> bool:
