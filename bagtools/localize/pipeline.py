@@ -100,6 +100,7 @@ class LocalizePipeline:
         self.keep_scans = keep_scans
         self.warnings: list[str] = []
         self.revisits = 0  # revisit factors the smoother joined (bagtools.localize.smoother.revisit_factors)
+        self.timing_s: dict = {}  # seconds of each part of _localize (summary.json: timing_s)
 
     def run(self) -> LocalizeResult:
         nav2_map = read_nav2_map(self.map_yaml)
@@ -164,16 +165,24 @@ class LocalizePipeline:
         t0 = time.perf_counter()
         front, odom = dataset.register(inputs)
         self.warnings.extend(front.warnings(self.options.topic))
+        t1 = time.perf_counter()
+        by_state: dict[str, float] = {}
         for step, k in enumerate(progress(inputs.order, total=len(inputs.order), desc="localizing", unit="scan")):
-            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k],
-                           continuous=front.run.steps[step].trusted)
+            t = time.perf_counter()
+            state = localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k],
+                                   continuous=front.run.steps[step].trusted)
+            by_state[state] = by_state.get(state, 0.0) + time.perf_counter() - t
+        t2 = time.perf_counter()
         poses = localizer.poses
         if self.options.smooth:
             revisits = revisit_factors(front.run.steps, localizer.poses)
             self.revisits = len(revisits)
             poses = smooth_track(front.run.steps, localizer.poses, localizer.matched,
                                  cuts=[e.index for e in localizer.events if e.kind == "lost"], revisits=revisits)
-        return localizer, poses, time.perf_counter() - t0
+        t3 = time.perf_counter()
+        self.timing_s = {"laser_odometry": t1 - t0, "localizer": t2 - t1, "localizer_by_state": by_state,
+                         "smoothing": t3 - t2, "total": t3 - t0}
+        return localizer, poses, t3 - t0
 
     def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
         """The bag's own map -> base at the scan stamps (its localizer's map -> odom on /tf, composed), or None."""
@@ -225,6 +234,8 @@ class LocalizePipeline:
             "smoothed": self.options.smooth,
             "revisits": self.revisits,
             "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
+            "speed_x_real_time_tracking": _tracking_speed(duration_s, counts, self.timing_s),
+            "timing_s": self.timing_s,
             "per_scan": {"stamp_ns": [int(s) for s in stamps], "state": [str(s) for s in result.states],
                          "score": [round(float(s), 4) for s in result.scores]},
             "options": asdict(self.options),
@@ -274,6 +285,20 @@ class LocalizePipeline:
                 "parts": parts, "difference": {"stamp_ns": [int(s) for s in common],
                                                "translation_m": [round(float(v), 4) for v in dist],
                                                "heading_deg": [round(float(v), 3) for v in heading]}}
+
+
+def _tracking_speed(duration_s: float, counts: dict[str, int], timing_s: dict) -> float | None:
+    """Bag seconds per second while tracking (None: no scan tracked): the tracked scans' share of the bag's
+    duration over the localizer's seconds on them plus their share of the laser odometry's and the smoothing's
+    (shares by scan count). The time spent searching, or carrying the robot where the map explains nothing
+    (unmapped), is left out: ``speed_x_real_time`` counts everything."""
+    scans, tracked = sum(counts.values()), counts.get(TRACKING, 0)
+    if not tracked or not timing_s:
+        return None
+    share = tracked / scans
+    spent = timing_s["localizer_by_state"].get(TRACKING, 0.0) + share * (timing_s["laser_odometry"]
+                                                                        + timing_s["smoothing"])
+    return share * duration_s / max(spent, 1e-9)
 
 
 def _errors(truth: Trajectory, estimate: Trajectory) -> dict:

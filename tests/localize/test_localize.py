@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,11 @@ def test_a_bag_is_localized_in_the_map_of_another_route(world: dict, odometry: b
     assert compared["scans_compared"] > 250 and compared["parts"] == []
     assert (result.map_to_odom is not None) == odometry
     assert s["speed_x_real_time"] > 10  # the bench row holds the speed target; this only catches a stall
+    t = s["timing_s"]  # where the time went: the parts add up, and tracking is the cheap part of it
+    assert sum(t["localizer_by_state"].values()) <= t["localizer"]
+    assert t["laser_odometry"] + t["localizer"] + t["smoothing"] <= t["total"]
+    assert set(t["localizer_by_state"]) <= {k for k, n in s["scans_by_state"].items() if n}
+    assert s["speed_x_real_time_tracking"] > s["speed_x_real_time"]  # the global search at the start is left out
 
 
 def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wrong(world: dict) -> None:
@@ -376,6 +382,27 @@ def test_a_motion_that_lags_along_a_corridor_is_corrected_by_the_map(tmp_path: P
     assert run()[-1] > 1.0
 
 
+def _with_and_without_floors(run: Callable[[], MapLocalizer], monkeypatch,
+                             window: tuple[float, float, float] | None = None) -> list[tuple[MapLocalizer, int]]:
+    """``run()`` twice: as it is, then with the tracker's searches (of ``window`` only, when given) at
+    ``min_score`` 0 (searched in full); each run's localizer and the nodes its searches scored."""
+    searched = tracker.match_scans_grid
+    runs = []
+    for floored in (True, False):
+        work: list[int] = []
+
+        def search(*args, floored=floored, work=work, **kwargs):
+            if not floored and (window is None or tuple(kwargs["search_range"]) == window):
+                kwargs["min_score"] = 0.0
+            found = searched(*args, **kwargs)
+            work.append(found.n_evaluated)
+            return found
+
+        monkeypatch.setattr(tracker, "match_scans_grid", search)
+        runs.append((run(), sum(work)))
+    return runs
+
+
 def test_a_wide_search_only_looks_for_poses_the_motion_cannot_explain(world: dict, monkeypatch) -> None:
     """The wheels jump 1 m at scan 150 (a glitch; the robot did not move): NDT and the window around the odometry's
     pose find nothing, and the wide window finds the robot where it was, at once. That search drops every pose
@@ -384,33 +411,40 @@ def test_a_wide_search_only_looks_for_poses_the_motion_cannot_explain(world: dic
     nav2 = read_nav2_map(world["map"])
     k0 = 150
     jump = np.array([1.0, 0.0, 0.0])
-    searched = tracker.match_scans_grid
 
-    def run(floored: bool) -> tuple[MapLocalizer, int]:
-        work = []
-
-        def search(*args, **kwargs):
-            if not floored:
-                kwargs["min_score"] = 0.0
-            found = searched(*args, **kwargs)
-            work.append(found.n_evaluated)
-            return found
-
-        monkeypatch.setattr(tracker, "match_scans_grid", search)
+    def run() -> MapLocalizer:
         localizer = MapLocalizer(nav2.occupied_points(), nav2.resolution_m)
         for step, k in enumerate(inputs.order):
             o = odom[k] if step < k0 else se2_compose(odom[k], jump)
             localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), o)
-        return localizer, sum(work)
+        return localizer
 
-    floored, work = run(True)
-    unfloored, all_work = run(False)
+    (floored, work), (unfloored, all_work) = _with_and_without_floors(run, monkeypatch)
     kinds = [(e.kind, e.index) for e in floored.events]
     assert kinds[0][0] == "fix" and ("lost", k0) in kinds and ("recovered", k0) in kinds, kinds
     placed = floored.poses
     errors = [np.hypot(*(placed[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order) if s in placed]
     assert max(errors) < 0.05, max(errors)
     assert floored.poses.keys() == unfloored.poses.keys()
+    assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
+    assert work < all_work, (work, all_work)
+
+
+def test_a_robot_carried_off_the_map_is_searched_only_for_what_it_would_take(world: dict, monkeypatch) -> None:
+    """The map's top third made unknown: the figure eight drives into it, carried by its motion, searched around
+    every fifth scan. The search around the motion's pose (WINDOW) is taken there only when it matches at least
+    poorly: its branch and bound drops every pose under that. The same poses as searching it all, for less work."""
+    inputs, odom, _ = scan_sequence(world["bag"])
+
+    def run() -> MapLocalizer:
+        localizer = _localizer_without_the_top_third(world)
+        for step, k in enumerate(inputs.order):
+            localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k], continuous=step > 0)
+        return localizer
+
+    (floored, work), (unfloored, all_work) = _with_and_without_floors(run, monkeypatch, tracker.WINDOW)
+    assert UNMAPPED in floored.states
+    assert floored.poses.keys() == unfloored.poses.keys() and floored.states == unfloored.states
     assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
     assert work < all_work, (work, all_work)
 
