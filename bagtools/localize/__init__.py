@@ -5,16 +5,17 @@
 - :class:`MapLocalizer`: the scans of a bag tracked in the map: searched for,
   confirmed among look-alike places, tracked, lost and recovered.
 - :func:`smooth_track`: the tracked poses smoothed with the laser odometry (a GTSAM pose graph), and the
-  places the robot came back to tied by their scans (:func:`revisit_factors`).
+  places the robot came back to tied by their scans (:func:`revisit_factors`), the map matches held where
+  they put the base less their offset from it (:func:`map_offset`).
 - :class:`LocalizePipeline`: a bag in a nav2 map, with the bag's own localizer
   (AMCL's map -> odom) and ground truth compared; :func:`write_localize` its files.
 """
 
 from bagtools.localize.global_search import GlobalLocalizer, Hypothesis
 from bagtools.localize.pipeline import LocalizeOptions, LocalizePipeline, LocalizeResult
-from bagtools.localize.smoother import revisit_factors, smooth_track
+from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.localize.tracker import MapLocalizer
 from bagtools.localize.writer import LOCALIZE_FILES, write_localize
 
 __all__ = ["LOCALIZE_FILES", "GlobalLocalizer", "Hypothesis", "LocalizeOptions", "LocalizePipeline", "LocalizeResult",
-           "MapLocalizer", "revisit_factors", "smooth_track", "write_localize"]
+           "MapLocalizer", "map_offset", "revisit_factors", "smooth_track", "write_localize"]

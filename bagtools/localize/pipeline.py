@@ -26,7 +26,7 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import open_bag
-from bagtools.localize.smoother import revisit_factors, smooth_track
+from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
@@ -101,6 +101,7 @@ class LocalizePipeline:
         self.warnings: list[str] = []
         self.revisits = 0  # revisit factors the smoother joined (bagtools.localize.smoother.revisit_factors)
         self.timing_s: dict = {}  # seconds of each part of _localize (summary.json: timing_s)
+        self.map_offset: np.ndarray | None = None  # the map matches' offset from the base (smoother.map_offset)
 
     def run(self) -> LocalizeResult:
         nav2_map = read_nav2_map(self.map_yaml)
@@ -175,10 +176,12 @@ class LocalizePipeline:
         t2 = time.perf_counter()
         poses = localizer.poses
         if self.options.smooth:
+            cuts = [e.index for e in localizer.events if e.kind == "lost"]
             revisits = revisit_factors(front.run.steps, localizer.poses)
             self.revisits = len(revisits)
-            poses = smooth_track(front.run.steps, localizer.poses, localizer.matched,
-                                 cuts=[e.index for e in localizer.events if e.kind == "lost"], revisits=revisits)
+            self.map_offset = map_offset(front.run.steps, localizer.poses, localizer.matched, cuts)
+            poses = smooth_track(front.run.steps, localizer.poses, localizer.matched, cuts=cuts, revisits=revisits,
+                                 offset=self.map_offset)
         t3 = time.perf_counter()
         self.timing_s = {"laser_odometry": t1 - t0, "localizer": t2 - t1, "localizer_by_state": by_state,
                          "smoothing": t3 - t2, "total": t3 - t0}
@@ -233,6 +236,7 @@ class LocalizePipeline:
             "odometry_used": result.map_to_odom is not None,
             "smoothed": self.options.smooth,
             "revisits": self.revisits,
+            "map_offset_m": None if self.map_offset is None else [float(v) for v in self.map_offset],
             "speed_x_real_time": duration_s / max(elapsed_s, 1e-9),
             "speed_x_real_time_tracking": _tracking_speed(duration_s, counts, self.timing_s),
             "timing_s": self.timing_s,

@@ -12,7 +12,8 @@ frozen map):
 - between factors: the front end's matches (``T_ref_cur`` of each scan
   against its keyframe, with the matcher's covariance), Gaussian;
 - prior factors: the scans matched well on the map (not carried by the
-  motion), at the tracker's pose with ``MAP_SIGMA`` per ``MAP_SPAN_M`` of
+  motion), at the tracker's pose less the map matches' offset from the base
+  (:func:`map_offset`), with ``MAP_SIGMA`` per ``MAP_SPAN_M`` of
   path, under a Cauchy kernel: a match the motion contradicts pulls with a
   bounded force. A map match's error is the map's error at that place, the
   same for every scan that sees it from there: a robot standing still, or
@@ -56,7 +57,7 @@ from bagtools.progress import progress
 from bagtools.slam.backend import UNLINKED_COVARIANCE
 from bagtools.slam.constraints import LoopClosureSearch, LoopOptions
 from bagtools.slam.graph import check_covariance
-from bagtools.transforms import se2_between, wrap_to_pi
+from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 #: Standard deviations (m, m, rad) of a map match's pose in the graph. The matches' errors are not independent
 #: from scan to scan (the map's own errors stay where they are), so they hold the trajectory against drift while
@@ -72,6 +73,15 @@ MIN_MAP_SHARE = 0.005
 ODOMETRY_DRIFT = (0.02, 0.01)
 #: Cauchy kernel width on the whitened map residual (in sigmas).
 MAP_KERNEL = 2.0
+
+
+#: The map matches' offset from the base (:func:`map_offset`) is measured between each matched scan and the matched
+#: scan this many matched scans later (about 2 s on the benchmark logs: the laser odometry drifts little over it)...
+OFFSET_LAG = 10
+#: ... each pair weighed by its two matches' noise (m; the tracker's matches scatter by about this) and the laser
+#: odometry's drift over its path (ODOMETRY_DRIFT); the offset is none unless the turns say otherwise, within
+#: OFFSET_PRIOR_M.
+OFFSET_MATCH_M, OFFSET_PRIOR_M = 0.01, 0.05
 
 
 #: A keyframe whose map pose lies this close (m) to an older keyframe's, at least LoopOptions.min_travel_m of path
@@ -119,9 +129,46 @@ def revisit_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],
     return factors
 
 
+def map_offset(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched: Iterable[int],
+               cuts: Iterable[int] = ()) -> np.ndarray:
+    """Where the map matches put the base, relative to where it is: the offset ``o`` (2,) (m, base frame: x ahead,
+    y to the left) of ``Z = X o`` (the match Z, the base X, o a pure translation), the same at every scan.
+
+    A map raytraced from scans draws a wall a little behind where the laser saw it, and NDT's cells blur its
+    corners: with a laser that looks ahead, every match places the base a little ahead (7-19 mm on the benchmark
+    logs' slam maps). Two visits of a place in opposite directions are then put twice that apart. The offset shows
+    where the robot turns: between two matched scans i and j, the front end's motion (t, phi) is the base's, and
+    the matches' motion is t + (R(phi) - I) o (a lever arm, as hand-eye calibration finds one). Weighted least
+    squares over each matched scan of ``poses`` and the one OFFSET_LAG matched scans later (no cut between), each
+    pair weighed by OFFSET_MATCH_M for each match and the laser odometry's drift (ODOMETRY_DRIFT) over its path,
+    under a Cauchy kernel (MAP_KERNEL); with none as the prior, within OFFSET_PRIOR_M: a robot that never turns
+    leaves it at zero. Zeros without pairs."""
+    keys = np.array(sorted(k for k in matched if k in poses), dtype=np.int64)
+    cut_at = np.sort(np.fromiter(cuts, dtype=np.int64))
+    first, then = keys[:-OFFSET_LAG], keys[OFFSET_LAG:]
+    joined = np.searchsorted(cut_at, first, side="right") == np.searchsorted(cut_at, then, side="right")
+    first, then = first[joined], then[joined]
+    if first.size == 0:
+        return np.zeros(2)
+    seen = se2_between(np.array([poses[k] for k in first]), np.array([poses[k] for k in then]))
+    moved = se2_between(np.array([steps[k].pose for k in first], dtype=np.float64),
+                        np.array([steps[k].pose for k in then], dtype=np.float64))
+    c, s = np.cos(moved[:, 2]), np.sin(moved[:, 2])
+    lever = np.stack([np.stack([c - 1.0, -s], axis=1), np.stack([s, c - 1.0], axis=1)], axis=1)  # R(phi) - I
+    sd = np.sqrt(2.0 * OFFSET_MATCH_M**2 + (ODOMETRY_DRIFT[0] * np.hypot(moved[:, 0], moved[:, 1])) ** 2)
+    A, y = lever / sd[:, None, None], (seen[:, :2] - moved[:, :2]) / sd[:, None]
+    weight, offset = np.ones(len(y)), np.zeros(2)
+    for _ in range(10):  # iteratively reweighted: a wrong match weighs as the kernel says
+        normal = np.einsum("n,nki,nkj->ij", weight, A, A) + np.eye(2) / OFFSET_PRIOR_M**2
+        offset = np.linalg.solve(normal, np.einsum("n,nki,nk->i", weight, A, y))
+        r = y - np.einsum("nij,j->ni", A, offset)
+        weight = 1.0 / (1.0 + np.einsum("ni,ni->n", r, r) / MAP_KERNEL**2)
+    return offset
+
+
 def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched: Iterable[int],
-                 cuts: Iterable[int] = (), revisits: Sequence[tuple[int, int, np.ndarray, np.ndarray]] = ()
-                 ) -> dict[int, np.ndarray]:
+                 cuts: Iterable[int] = (), revisits: Sequence[tuple[int, int, np.ndarray, np.ndarray]] = (),
+                 offset: np.ndarray | None = None) -> dict[int, np.ndarray]:
     """Smoothed map poses of the tracked scans (see the module docstring).
 
     Args:
@@ -132,6 +179,8 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
             after it.
         revisits: (a, b, T_a_b, covariance) between tracked scans (:func:`revisit_factors`), across cuts too
             (both ends are placed in the map).
+        offset: the map matches' offset from the base (:func:`map_offset`; None: none): the prior factors hold
+            the base where the match is less it.
     Returns:
         scan index -> smoothed [x, y, theta], for every scan of ``poses``.
     """
@@ -161,9 +210,11 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
         if i in keep and j in keep:
             revisit = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(covariance))
             graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), revisit))
+    back = np.zeros(3) if offset is None else np.r_[-np.asarray(offset, dtype=np.float64), 0.0]
     for k, share in _map_shares(steps, matched).items():
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA) / np.sqrt(share))
-        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*poses[k]), gtsam.noiseModel.Robust.Create(kernel, noise)))
+        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*se2_compose(poses[k], back)),
+                                         gtsam.noiseModel.Robust.Create(kernel, noise)))
     smoothed = {k: np.asarray(poses[k], dtype=np.float64).copy() for k in nodes}
     if keep:
         params = gtsam.LevenbergMarquardtParams()

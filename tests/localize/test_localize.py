@@ -54,6 +54,7 @@ def test_a_bag_is_localized_in_the_map_of_another_route(world: dict, odometry: b
     assert t["laser_odometry"] + t["localizer"] + t["smoothing"] <= t["total"]
     assert set(t["localizer_by_state"]) <= {k for k, n in s["scans_by_state"].items() if n}
     assert s["speed_x_real_time_tracking"] > s["speed_x_real_time"]  # the global search at the start is left out
+    assert math.hypot(*s["map_offset_m"]) < 0.01, s["map_offset_m"]  # a laser that sees all round: no offset
 
 
 def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wrong(world: dict) -> None:

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from bagtools.localize.smoother import revisit_factors, smooth_track
+from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.ndtodom.steps import ScanStep
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world import World
@@ -24,16 +24,17 @@ def _path(n: int = 120) -> np.ndarray:
     return np.array(poses)
 
 
-def _steps(odometry: np.ndarray, rng: np.random.Generator, every: int = 5) -> list[ScanStep]:
+def _steps(odometry: np.ndarray, rng: np.random.Generator, every: int = 5,
+           noise: tuple[float, float, float] = (0.005, 0.005, 0.001)) -> list[ScanStep]:
     """Front-end steps over ``odometry`` poses (its own frame): each scan matched against the keyframe of
-    ``every`` scans before it, with 5 mm noise."""
+    ``every`` scans before it, with ``noise`` (standard deviations, m, m, rad)."""
     steps = []
     keyframe = 0
     for k, pose in enumerate(odometry):
         if k == 0:
             steps.append(ScanStep(0, pose, np.zeros((0, 2)), -1, np.zeros(3), COV, 1.0, "first", True))
             continue
-        T = se2_between(odometry[keyframe], pose) + rng.normal(0.0, [0.005, 0.005, 0.001])
+        T = se2_between(odometry[keyframe], pose) + rng.normal(0.0, noise)
         steps.append(ScanStep(k * 100_000_000, pose, np.zeros((0, 2)), keyframe, T, COV, 0.9, "ndt", k % every == 0))
         if k % every == 0:
             keyframe = k
@@ -68,6 +69,36 @@ def test_the_graph_is_cut_where_the_robot_was_lost_a_kidnap_is_not_smoothed_over
     assert _error(cut, truth).max() < 0.05
     joined = smooth_track(steps, tracked, matched=set(tracked))  # without the cut, the odometry ties them
     assert _error(joined, truth).max() > 0.5
+
+
+def _out_and_turn_back() -> np.ndarray:
+    """A robot driving 3 m, turning round on the spot, driving back and turning round again (map frame)."""
+    poses = [np.array([1.0, 2.0, 0.3])]
+    for motion in [(0.05, 0.0, 0.0)] * 60 + [(0.0, 0.0, np.pi / 30)] * 30 + [(0.05, 0.0, 0.0)] * 60 + [
+            (0.0, 0.0, -np.pi / 30)] * 30:
+        poses.append(se2_compose(poses[-1], np.array(motion)))
+    return np.array(poses)
+
+
+def test_the_map_matches_offset_from_the_base_shows_where_the_robot_turns_and_is_taken_out() -> None:
+    """Every map match puts the base 2 cm ahead and 5 mm to the right of where it is (a raytraced map's walls
+    behind what the laser saw): driving straight, the laser odometry cannot tell; turning round, the matches move
+    by twice that against it. The offset is found, and the smoothed poses are the base's, not the matches'."""
+    rng = np.random.default_rng(8)
+    truth = _out_and_turn_back()
+    offset = np.array([0.02, -0.005])
+    steps = _steps(truth, rng, noise=(0.0005, 0.0005, 0.0001))  # a short drive: the laser odometry holds
+    tracked = {k: se2_compose(p, np.r_[offset, 0.0]) + rng.normal(0.0, [0.005, 0.005, 0.002])
+               for k, p in enumerate(truth)}
+    found = map_offset(steps, tracked, matched=set(tracked))
+    assert np.hypot(*(found - offset)) < 0.003, found
+    kept = _error(smooth_track(steps, tracked, matched=set(tracked)), truth)
+    taken_out = _error(smooth_track(steps, tracked, matched=set(tracked), offset=found), truth)
+    assert kept.mean() > 0.005 and taken_out.mean() < 0.4 * kept.mean(), (kept.mean(), taken_out.mean())
+    straight = np.array([se2_compose(truth[0], np.array([0.05 * k, 0.0, 0.0])) for k in range(120)])
+    ahead = {k: se2_compose(p, np.r_[offset, 0.0]) for k, p in enumerate(straight)}
+    assert np.hypot(*map_offset(_steps(straight, rng), ahead, matched=set(ahead))) < 0.002  # nothing says it
+    assert not map_offset(steps, {}, matched=()).any()
 
 
 def test_a_stretch_with_no_map_match_keeps_the_tracked_poses() -> None:
