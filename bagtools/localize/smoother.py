@@ -75,9 +75,11 @@ ODOMETRY_DRIFT = (0.02, 0.01)
 MAP_KERNEL = 2.0
 
 
-#: The map matches' offset from the base (:func:`map_offset`) is measured between each matched scan and the matched
-#: scan this many matched scans later (about 2 s on the benchmark logs: the laser odometry drifts little over it)...
-OFFSET_LAG = 10
+#: The map matches' offset from the base (:func:`map_offset`) is measured between each matched scan and the first
+#: matched scan this much path later (m; a turn counting LoopOptions.turn_m_per_rad per radian): a turn round on
+#: the spot (1.6 m) fits in one pair, and the laser odometry drifts a few centimetres at most over it. (Ten scans
+#: on: CSAIL's scans are a metre apart, and its laser odometry's error over ten of them bends the estimate.)...
+OFFSET_SPAN_M = 2.0
 #: ... each pair weighed by its two matches' noise (m; the tracker's matches scatter by about this) and the laser
 #: odometry's drift over its path (ODOMETRY_DRIFT); the offset is none unless the turns say otherwise, within
 #: OFFSET_PRIOR_M.
@@ -135,24 +137,27 @@ def map_offset(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched:
     y to the left) of ``Z = X o`` (the match Z, the base X, o a pure translation), the same at every scan.
 
     A map raytraced from scans draws a wall a little behind where the laser saw it, and NDT's cells blur its
-    corners: with a laser that looks ahead, every match places the base a little ahead (7-19 mm on the benchmark
+    corners: with a laser that looks ahead, every match places the base a little ahead (8-24 mm on the benchmark
     logs' slam maps). Two visits of a place in opposite directions are then put twice that apart. The offset shows
     where the robot turns: between two matched scans i and j, the front end's motion (t, phi) is the base's, and
     the matches' motion is t + (R(phi) - I) o (a lever arm, as hand-eye calibration finds one). Weighted least
-    squares over each matched scan of ``poses`` and the one OFFSET_LAG matched scans later (no cut between), each
-    pair weighed by OFFSET_MATCH_M for each match and the laser odometry's drift (ODOMETRY_DRIFT) over its path,
-    under a Cauchy kernel (MAP_KERNEL); with none as the prior, within OFFSET_PRIOR_M: a robot that never turns
-    leaves it at zero. Zeros without pairs."""
+    squares over each matched scan of ``poses`` and the first matched scan OFFSET_SPAN_M of path later (no cut
+    between), each pair weighed by OFFSET_MATCH_M for each match and the laser odometry's drift (ODOMETRY_DRIFT)
+    over its path, under a Cauchy kernel (MAP_KERNEL); with none as the prior, within OFFSET_PRIOR_M: a robot that
+    never turns leaves it at zero. Zeros without pairs."""
     keys = np.array(sorted(k for k in matched if k in poses), dtype=np.int64)
+    front = np.array([steps[k].pose for k in keys], dtype=np.float64).reshape(-1, 3)
+    travelled = np.r_[0.0, np.cumsum(_path_m(front))]
+    later = np.searchsorted(travelled, travelled + OFFSET_SPAN_M)  # the first matched scan that far on
+    first = np.flatnonzero(later < len(keys))
+    then = later[first]
     cut_at = np.sort(np.fromiter(cuts, dtype=np.int64))
-    first, then = keys[:-OFFSET_LAG], keys[OFFSET_LAG:]
-    joined = np.searchsorted(cut_at, first, side="right") == np.searchsorted(cut_at, then, side="right")
+    joined = np.searchsorted(cut_at, keys[first], side="right") == np.searchsorted(cut_at, keys[then], side="right")
     first, then = first[joined], then[joined]
     if first.size == 0:
         return np.zeros(2)
-    seen = se2_between(np.array([poses[k] for k in first]), np.array([poses[k] for k in then]))
-    moved = se2_between(np.array([steps[k].pose for k in first], dtype=np.float64),
-                        np.array([steps[k].pose for k in then], dtype=np.float64))
+    seen = se2_between(np.array([poses[k] for k in keys[first]]), np.array([poses[k] for k in keys[then]]))
+    moved = se2_between(front[first], front[then])
     c, s = np.cos(moved[:, 2]), np.sin(moved[:, 2])
     lever = np.stack([np.stack([c - 1.0, -s], axis=1), np.stack([s, c - 1.0], axis=1)], axis=1)  # R(phi) - I
     sd = np.sqrt(2.0 * OFFSET_MATCH_M**2 + (ODOMETRY_DRIFT[0] * np.hypot(moved[:, 0], moved[:, 1])) ** 2)
@@ -233,10 +238,15 @@ def _map_shares(steps: Sequence[ScanStep], matched: Iterable[int]) -> dict[int, 
     if keys.size == 0:
         return {}
     pose = np.array([np.asarray(steps[k].pose, dtype=np.float64) for k in keys]).reshape(-1, 3)
-    step = np.diff(pose, axis=0)
-    path = np.hypot(step[:, 0], step[:, 1]) + LoopOptions().turn_m_per_rad * np.abs(wrap_to_pi(step[:, 2]))
-    share = np.r_[1.0, np.clip(path / MAP_SPAN_M, MIN_MAP_SHARE, 1.0)]
+    share = np.r_[1.0, np.clip(_path_m(pose) / MAP_SPAN_M, MIN_MAP_SHARE, 1.0)]
     return dict(zip(keys.tolist(), share.tolist()))
+
+
+def _path_m(poses: np.ndarray) -> np.ndarray:
+    """(N - 1,) path (m) between consecutive poses (N, 3) [x, y, theta], a turn counting
+    LoopOptions.turn_m_per_rad per radian (as slam's graph distances)."""
+    step = np.diff(poses, axis=0)
+    return np.hypot(step[:, 0], step[:, 1]) + LoopOptions().turn_m_per_rad * np.abs(wrap_to_pi(step[:, 2]))
 
 
 def _between_factors(steps: Sequence[ScanStep], poses: dict[int, np.ndarray],
