@@ -181,7 +181,7 @@ class LocalizePipeline:
             self.revisits = len(revisits)
             self.map_offset = map_offset(front.run.steps, localizer.poses, localizer.matched, cuts)
             poses = smooth_track(front.run.steps, localizer.poses, localizer.matched, cuts=cuts, revisits=revisits,
-                                 offset=self.map_offset)
+                                 offset=self.map_offset, scores=localizer.scores)
         t3 = time.perf_counter()
         self.timing_s = {"laser_odometry": t1 - t0, "localizer": t2 - t1, "localizer_by_state": by_state,
                          "smoothing": t3 - t2, "total": t3 - t0}

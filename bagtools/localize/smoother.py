@@ -21,7 +21,10 @@ frozen map):
   scan. So each prior weighs its share of MAP_SPAN_M since the matched scan
   before it (a turn counts ``turn_m_per_rad`` per radian, as in slam's graph
   distances); scans that far apart or more (CSAIL's, a metre apart) weigh one
-  full MAP_SIGMA each;
+  full MAP_SIGMA each. And a match weighs as well as the map explains its scan:
+  its share times (its score over the median matched score, at most 1) to the
+  ``MAP_SCORE_POWER``: where the map saw a place only from afar, or in part,
+  its matches say less;
 - revisit factors (:func:`revisit_factors`): a keyframe the map places
   within ``REVISIT_RADIUS_M`` of an older keyframe, at least slam's
   ``min_travel_m`` of path later, matched against the scans around the older
@@ -67,6 +70,9 @@ MAP_SIGMA = (0.2, 0.2, 0.05)
 MAP_SPAN_M = 0.2
 #: A map match weighs at least this share (1 mm of MAP_SPAN_M): a robot standing still still counts its scans a little.
 MIN_MAP_SHARE = 0.005
+#: ... times (its score over the median matched score, at most 1) to this power: a scan the map explains in part
+#: (a place it saw from afar) places the robot less surely.
+MAP_SCORE_POWER = 2.0
 #: The laser odometry drifts by this much per metre of a match (m/m, rad/m), whatever its matcher's covariance
 #: says: 1 to 2 % on the benchmark logs. A bag with scans far apart (CSAIL: a scan every metre or so) leans less
 #: on its long steps.
@@ -173,7 +179,7 @@ def map_offset(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched:
 
 def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched: Iterable[int],
                  cuts: Iterable[int] = (), revisits: Sequence[tuple[int, int, np.ndarray, np.ndarray]] = (),
-                 offset: np.ndarray | None = None) -> dict[int, np.ndarray]:
+                 offset: np.ndarray | None = None, scores: dict[int, float] | None = None) -> dict[int, np.ndarray]:
     """Smoothed map poses of the tracked scans (see the module docstring).
 
     Args:
@@ -186,6 +192,7 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
             (both ends are placed in the map).
         offset: the map matches' offset from the base (:func:`map_offset`; None: none): the prior factors hold
             the base where the match is less it.
+        scores: scan index -> the tracker's score of its map match (None: every match weighs alike).
     Returns:
         scan index -> smoothed [x, y, theta], for every scan of ``poses``.
     """
@@ -216,7 +223,7 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
             revisit = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(covariance))
             graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*T), revisit))
     back = np.zeros(3) if offset is None else np.r_[-np.asarray(offset, dtype=np.float64), 0.0]
-    for k, share in _map_shares(steps, matched).items():
+    for k, share in _map_shares(steps, matched, scores).items():
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(MAP_SIGMA) / np.sqrt(share))
         graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*se2_compose(poses[k], back)),
                                          gtsam.noiseModel.Robust.Create(kernel, noise)))
@@ -231,14 +238,21 @@ def smooth_track(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matche
     return smoothed
 
 
-def _map_shares(steps: Sequence[ScanStep], matched: Iterable[int]) -> dict[int, float]:
+def _map_shares(steps: Sequence[ScanStep], matched: Iterable[int],
+                scores: dict[int, float] | None = None) -> dict[int, float]:
     """Matched scan -> the share of MAP_SPAN_M (in (0, 1]) of path since the matched scan before it (the first:
-    1), measured on the front end's poses, a turn counting LoopOptions.turn_m_per_rad per radian."""
+    1), measured on the front end's poses, a turn counting LoopOptions.turn_m_per_rad per radian; times (its
+    score over the median of ``scores``, at most 1) to the MAP_SCORE_POWER (a scan without a score: 1)."""
     keys = np.array(sorted(matched), dtype=np.int64)
     if keys.size == 0:
         return {}
     pose = np.array([np.asarray(steps[k].pose, dtype=np.float64) for k in keys]).reshape(-1, 3)
     share = np.r_[1.0, np.clip(_path_m(pose) / MAP_SPAN_M, MIN_MAP_SHARE, 1.0)]
+    if scores:
+        score = np.array([scores.get(k, np.inf) for k in keys.tolist()], dtype=np.float64)
+        known = score[np.isfinite(score)]
+        if known.size:
+            share *= np.minimum(score / max(float(np.median(known)), 1e-12), 1.0) ** MAP_SCORE_POWER
     return dict(zip(keys.tolist(), share.tolist()))
 
 
