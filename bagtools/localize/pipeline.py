@@ -5,7 +5,8 @@
         _localize()       the laser odometry (ndt-odom's front end, with the wheels when used) as the motion,
                           every scan through MapLocalizer (bagtools.localize.tracker): search, confirm, track;
                           then the tracked poses smoothed with the laser odometry and the revisits (a place seen
-                          again, matched scans to scans) in one pose graph (bagtools.localize.smoother)
+                          again, matched scans to scans) in one pose graph (bagtools.localize.smoother), the map
+                          matches weighed by their scores and held less their offset from the base (map_offset)
         _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
         _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
         _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
