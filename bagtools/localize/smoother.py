@@ -162,7 +162,8 @@ def map_offset(steps: Sequence[ScanStep], poses: dict[int, np.ndarray], matched:
     first, then = first[joined], then[joined]
     if first.size == 0:
         return np.zeros(2)
-    seen = se2_between(np.array([poses[k] for k in keys[first]]), np.array([poses[k] for k in keys[then]]))
+    placed = np.array([poses[k] for k in keys], dtype=np.float64)
+    seen = se2_between(placed[first], placed[then])
     moved = se2_between(front[first], front[then])
     c, s = np.cos(moved[:, 2]), np.sin(moved[:, 2])
     lever = np.stack([np.stack([c - 1.0, -s], axis=1), np.stack([s, c - 1.0], axis=1)], axis=1)  # R(phi) - I

@@ -454,7 +454,10 @@ class MapLocalizer:
             # can): its search drops every pose scoring under what such a pose needs, which prunes most of it.
             # Within the bound the first window's pose is taken only when it scores at least poorly (else the
             # motion carries the robot): its search drops every pose under that.
-            floor = self._far_needed(sd) if window is not windows[0] else self._poor() if bound is not None else 0.0
+            if window is not windows[0]:
+                floor = self._far_needed(sd)
+            else:
+                floor = self._poor() if bound is not None else 0.0
             found = match_scans_grid(points, self.fine, initial_pose=prior, search_range=window, min_score=floor)
             start = np.asarray(found.pose, dtype=np.float64) if found.ok else prior
             searched = self._refine(points, start, prior if sd is not None and window is WINDOW else None, sd)
