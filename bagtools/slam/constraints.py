@@ -30,7 +30,15 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    model) refines the best pose and must stay within
    ``max_refine_m``/``max_refine_rad`` of it. Wide windows (``wide_window_m``
    and more: the estimate is unsure) cost tens of milliseconds: at most one is
-   searched per ``wide_spacing_m`` of path.
+   searched per ``wide_spacing_m`` of path. Last, the two maps must not
+   contradict each other's free space (:mod:`bagtools.slam.freespace`): the
+   score counts points on walls, not walls standing where the other map's
+   laser saw through. A look-alike (a room of the same shape furnished
+   otherwise, a corridor a few metres along) can score as well as the place,
+   but puts walls in both maps' open space; a world that changed between the
+   visits (a door shut, a person passing) contradicts one map only. So a match
+   where more than ``max_seen_through`` of each map's points lie where the
+   other saw through is refused (``SEES_THROUGH``).
 3. **Covariance** (:func:`loop_covariance`): the ambiguity of the correlative
    search (Olson's likelihood-weighted spread around the best pose), the
    inverse NDT Hessian (large along a corridor, where the match is weak), the
@@ -99,6 +107,7 @@ from bagtools.ndt import (
     MIN_SCAN_POINTS, CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid,
     match_scans_grid_peaks, voxel_subsample,
 )
+from bagtools.slam.freespace import FreeSpace
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 # Candidate outcomes (summary.json counts them).
@@ -117,6 +126,7 @@ TOO_FEW_POINTS = "too few points"
 #: place outside it.
 COVER_SIGMAS = 2.0
 LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
+SEES_THROUGH = "walls where the other map saw through"
 
 
 @dataclass(frozen=True)
@@ -153,6 +163,7 @@ class LoopOptions:
     ndt_cell_m: float = 0.5
     max_refine_m: float = 0.3
     max_refine_rad: float = 0.1
+    max_seen_through: float = 0.1
     cache_size: int = 64
     global_after_m: float = 30.0
     global_tile_m: float = 4.0
@@ -173,7 +184,7 @@ class LoopOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name in ("min_score", "global_min_score", "global_unique_ratio"):
+        for name in ("min_score", "global_min_score", "global_unique_ratio", "max_seen_through"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
         for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size", "global_max_tiles"):
@@ -280,6 +291,8 @@ class _OldMap:
     correlative: CorrelativeReference
     ndt: NdtReference
     covariance: np.ndarray  # of the map's assembly, see LoopClosureSearch.map_covariance
+    scans: list[tuple[np.ndarray, np.ndarray]]  # its keyframes' (base position, points) in the old keyframe's frame
+    free: FreeSpace | None = None  # built when a match first needs it (see LoopClosureSearch._seen_through)
 
 
 class LoopClosureSearch:
@@ -430,9 +443,11 @@ class LoopClosureSearch:
             return cached
         o = self.options
         keyframes = self._old_range(old)
-        points = self._moved(keyframes, poses, poses[old])
+        scans = self._placed(keyframes, poses, poses[old])
+        points = np.vstack([p for _, p in scans])
         built = _OldMap(CorrelativeReference.from_points(points, o.resolution_m),
-                        NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes))
+                        NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes),
+                        scans)
         if not cache:
             return built
         self._cache[old] = built
@@ -469,14 +484,37 @@ class LoopClosureSearch:
             thinned = voxel_subsample(points, voxel)
         return thinned
 
-    def _moved(self, keyframes: range, poses: np.ndarray, frame_pose: np.ndarray) -> np.ndarray:
-        """The points of ``keyframes`` moved into the frame of the pose ``frame_pose`` (estimate), stacked (M,2)."""
+    def _placed(self, keyframes: range, poses: np.ndarray, frame_pose: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each of ``keyframes`` in the frame of the pose ``frame_pose`` (estimate): (its base's position (2,),
+        its points (N,2))."""
         out = []
         for k in keyframes:
             T = se2_between(frame_pose, poses[k])
             c, s = math.cos(T[2]), math.sin(T[2])
-            out.append(self.points[k] @ np.array([[c, s], [-s, c]]) + T[:2])
-        return np.vstack(out) if out else np.zeros((0, 2))
+            out.append((T[:2], self.points[k] @ np.array([[c, s], [-s, c]]) + T[:2]))
+        return out
+
+    def _moved(self, keyframes: range, poses: np.ndarray, frame_pose: np.ndarray) -> np.ndarray:
+        """The points of ``keyframes`` moved into the frame of the pose ``frame_pose`` (estimate), stacked (M,2)."""
+        placed = self._placed(keyframes, poses, frame_pose)
+        return np.vstack([points for _, points in placed]) if placed else np.zeros((0, 2))
+
+    def _seen_through(self, old_map: _OldMap, new: int, poses: np.ndarray, T_old_new: np.ndarray) -> float:
+        """How much the two maps, matched at ``T_old_new``, contradict each other's free space: the smaller of the
+        shares of each map's points that fall where the other's rays passed (see :mod:`bagtools.slam.freespace`).
+        The smaller, because a world that changed between the visits (a door shut, a person passing) puts walls
+        in one map's free space, while a look-alike puts them in both."""
+        resolution = self.options.resolution_m
+        if old_map.free is None:
+            old_map.free = FreeSpace.from_scans(old_map.scans, resolution)
+        new_scans = self._placed(self._new_range(new), poses, poses[new])
+        new_free = FreeSpace.from_scans(new_scans, resolution)
+        new_points = np.vstack([points for _, points in new_scans])
+        c, s = math.cos(T_old_new[2]), math.sin(T_old_new[2])
+        R = np.array([[c, s], [-s, c]])
+        old_points = np.vstack([points for _, points in old_map.scans])
+        return min(old_map.free.seen_through(new_points @ R + T_old_new[:2]),
+                   new_free.seen_through((old_points - T_old_new[:2]) @ R.T))
 
     def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float],
               guess: np.ndarray | None = None, kind: str = LOCAL) -> LoopCandidate:
@@ -531,6 +569,8 @@ class LoopClosureSearch:
         cand.score = float(grid.score)
         if ndt.score <= 0 or np.hypot(moved[0], moved[1]) > o.max_refine_m or abs(moved[2]) > o.max_refine_rad:
             cand.status = REFINE_FAILED
+        elif self._seen_through(old_map, new, poses, ndt.pose) > o.max_seen_through:
+            cand.status = SEES_THROUGH
         else:
             cand.T_old_new = ndt.pose
             cand.covariance = loop_covariance(grid, ndt.hessian, ndt.pose, old_map.covariance,
