@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.common import Row
+from bench.common import Row, bag_halves
 
 REAL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 SIDE_M = 100.0
@@ -106,9 +106,9 @@ def _reverse_rows(log: str, bag: Path, reference, slam_trajectory, tmp: Path) ->
     from bagtools.grid import write_nav2_map
     from bagtools.localize import LocalizeOptions, LocalizePipeline
     from bagtools.slam import SlamOptions, SlamPipeline
-    from bagtools.trajectory.relations import Relations, relation_errors
+    from bagtools.trajectory.relations import relation_errors
 
-    first, second = _halves(bag, tmp)
+    first, second = bag_halves(bag, tmp)
     slam = SlamPipeline(first, SlamOptions()).run()
     map_yaml = write_nav2_map(slam.grid, tmp / f"{log}_first_half")
     slam_speed = (int(slam.trajectory.stamps_ns[-1]) - int(slam.trajectory.stamps_ns[0])) * 1e-9 / max(
@@ -116,10 +116,7 @@ def _reverse_rows(log: str, bag: Path, reference, slam_trajectory, tmp: Path) ->
     rows: list[Row] = []
     for odometry in (True, False):
         result = LocalizePipeline(second, map_yaml, LocalizeOptions(use_odometry=odometry)).run()
-        lo, hi = int(result.stamps_ns[0]), int(result.stamps_ns[-1])
-        inside = ((reference.first_ns >= lo) & (reference.first_ns <= hi) & (reference.second_ns >= lo)
-                  & (reference.second_ns <= hi))
-        half = Relations(reference.first_ns[inside], reference.second_ns[inside], reference.motion[inside])
+        half = reference.within(int(result.stamps_ns[0]), int(result.stamps_ns[-1]))
         error, theirs = relation_errors(half, result.trajectory), relation_errors(half, slam_trajectory)
         s = result.summary
         mode = "with odometry" if odometry else "scans only"
@@ -138,30 +135,6 @@ def _reverse_rows(log: str, bag: Path, reference, slam_trajectory, tmp: Path) ->
                         "their share of the laser odometry's and the smoothing's)", s["speed_x_real_time_tracking"],
                         "x real time", "slam of the first half, whole command", slam_speed, True, ">= 50"))
     return rows
-
-
-def _halves(bag: Path, out_dir: Path, topic: str = "/scan") -> tuple[Path, Path]:
-    """A ROS 1 bag cut in two by its scans, in one pass: the first half with everything recorded before its last
-    scan, the second with everything from its first scan on (and /tf_static)."""
-    from rosbags.rosbag1 import Reader, Writer
-
-    paths = (out_dir / f"{bag.stem}_first.bag", out_dir / f"{bag.stem}_second.bag")
-    with Reader(bag) as reader, Writer(paths[0]) as first, Writer(paths[1]) as second:
-        half = sum(c.msgcount for c in reader.connections if c.topic == topic) // 2
-        out = [{c.id: w.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-                for c in reader.connections} for w in (first, second)]
-        scans = 0
-        for connection, stamp_ns, raw in reader.messages():
-            if connection.topic == topic:
-                scans += 1
-                into_first, into_second = scans <= half, scans > half
-            else:
-                into_first, into_second = scans <= half, scans >= half or connection.topic == "/tf_static"
-            if into_first:
-                first.write(out[0][connection.id], stamp_ns, raw)
-            if into_second:
-                second.write(out[1][connection.id], stamp_ns, raw)
-    return paths
 
 
 def scan_sequence(bag: Path):

@@ -55,6 +55,12 @@ class Relations:
     def __len__(self) -> int:
         return int(self.first_ns.shape[0])
 
+    def within(self, first_ns: int, last_ns: int) -> Relations:
+        """The relations whose two stamps both lie in [first_ns, last_ns] (a part of the log)."""
+        inside = ((self.first_ns >= first_ns) & (self.first_ns <= last_ns) & (self.second_ns >= first_ns)
+                  & (self.second_ns <= last_ns))
+        return Relations(self.first_ns[inside], self.second_ns[inside], self.motion[inside])
+
 
 def read_relations(path: str | Path) -> Relations:
     """Read a ``.relations`` file (see the module docstring); blank lines and ``#`` comments are skipped.

@@ -51,6 +51,16 @@ def test_text_round_trip(tmp_path: Path) -> None:
     np.testing.assert_allclose(back.motion, rel.motion, atol=1e-6)
 
 
+def test_the_relations_of_a_part_of_the_log_lie_wholly_in_it() -> None:
+    traj = _trajectory(_path())
+    rel = relations_from_trajectory(traj, np.array([[0, 1], [3, 9], [20, 2], [12, 19], [19, 12], [15, 25]]))
+    part = rel.within(int(traj.stamps_ns[10]), int(traj.stamps_ns[20]))
+    assert list(zip(part.first_ns.tolist(), part.second_ns.tolist())) == [
+        (int(traj.stamps_ns[12]), int(traj.stamps_ns[19])), (int(traj.stamps_ns[19]), int(traj.stamps_ns[12]))]
+    np.testing.assert_array_equal(part.motion, rel.motion[3:5])
+    assert len(rel.within(int(traj.stamps_ns[26]), int(traj.stamps_ns[29]))) == 0
+
+
 def test_a_perfect_trajectory_scores_zero_and_a_known_error_is_measured() -> None:
     poses = _path()
     truth = _trajectory(poses)
