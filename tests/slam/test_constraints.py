@@ -324,7 +324,8 @@ def test_global_tiles_cover_the_old_path_once_per_tile() -> None:
 
 @pytest.mark.parametrize("field,value", [("search_radius_m", 0.0), ("min_score", 1.5), ("max_candidates", 0),
                                          ("old_map_keyframes", -1), ("drift_per_m", float("nan")),
-                                         ("global_min_score", -0.1), ("global_tile_m", 0.0), ("global_max_tiles", 0)])
+                                         ("global_min_score", -0.1), ("global_tile_m", 0.0), ("global_max_tiles", 0),
+                                         ("max_seen_through", 1.5)])
 def test_bad_loop_options(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         LoopOptions(**{field: value})
