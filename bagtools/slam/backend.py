@@ -30,8 +30,11 @@ system would:
    consistent follow-up. The graph's robust loop kernel and the outlier check
    hold against a wrong pair that got through.
 
-At the end, matches still waiting for confirmation are rejected and the graph
-is optimized once more (with the same outlier check).
+At the end no keyframe comes after the matches still waiting for a follow-up:
+each is followed up at the keyframes before it instead (the same evidence: the
+old chain, the match, and the new chain between the two keyframes). Matches
+still waiting then are rejected, and the graph is optimized once more (with
+the same outlier check).
 
 Graph distances (for the search's uncertainty) are shortest paths through the
 graph (``scipy.sparse.csgraph.dijkstra``): an odometry edge weighs its length
@@ -134,6 +137,7 @@ class _Builder:
                 self.search.add_keyframe(self.steps[int(step)].points_base, motion, covariance)
                 self._close_loops(node)
         if self.check is not None:
+            self._follow_up_backwards()
             self.check.flush()
         self._optimize(node=len(self.keyframe_steps) - 1)
         if self.counts["unlinked keyframes"]:
@@ -257,19 +261,35 @@ class _Builder:
         """Match ``node`` where each pending match (but look-alikes) puts it, once its new map shares no keyframe
         with the match's (the old chain, the match, the new chain); a consistent follow-up confirms the pair."""
         o = self.options.loop
-        poses = self.graph.poses
         for p in self.check.to_follow_up():
-            if node - p.new <= o.new_map_keyframes:
-                continue
-            guess = se2_compose(p.T_old_new, se2_between(poses[p.new], poses[node]))
-            sigma_t, sigma_r = self.search.sigmas(abs(self.search.path_m[node] - self.search.path_m[p.new]))
-            cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess, kind=FOLLOW_UP)
-            cand.follows = p
-            self.candidates.append(cand)
-            if cand.T_old_new is None:
-                continue
-            for c in self.check.review(cand, poses):
-                self._add_loop(c)
+            if node - p.new > o.new_map_keyframes:
+                self._follow_up_at(p, node)
+
+    def _follow_up_backwards(self) -> None:
+        """At the end of the run no keyframe comes after the matches still waiting: each is followed up at the
+        keyframes before it instead, from the nearest whose new map shares none of its keyframes back, over
+        ``pending_keyframes``, until one confirms it. The evidence is the same: the old chain, the match, and
+        the new chain between the two keyframes."""
+        o = self.options.loop
+        for p in self.check.to_follow_up():
+            for node in range(p.new - o.new_map_keyframes - 1, max(p.new - o.pending_keyframes, 0) - 1, -1):
+                if p.status != PENDING or self._follow_up_at(p, node):
+                    break
+
+    def _follow_up_at(self, p: LoopCandidate, node: int) -> bool:
+        """Match ``node`` where the pending match ``p`` puts it; True if that confirmed a pair."""
+        poses = self.graph.poses
+        guess = se2_compose(p.T_old_new, se2_between(poses[p.new], poses[node]))
+        sigma_t, sigma_r = self.search.sigmas(abs(self.search.path_m[node] - self.search.path_m[p.new]))
+        cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess, kind=FOLLOW_UP)
+        cand.follows = p
+        self.candidates.append(cand)
+        if cand.T_old_new is None:
+            return False
+        accepted = self.check.review(cand, poses)
+        for c in accepted:
+            self._add_loop(c)
+        return bool(accepted)
 
     def _add_loop(self, cand: LoopCandidate) -> None:
         self.graph.add(Constraint(cand.old, cand.new, cand.T_old_new, cand.covariance, LOOP))
