@@ -292,6 +292,7 @@ class _OldMap:
     ndt: NdtReference
     covariance: np.ndarray  # of the map's assembly, see LoopClosureSearch.map_covariance
     scans: list[tuple[np.ndarray, np.ndarray]]  # its keyframes' (base position, points) in the old keyframe's frame
+    points: np.ndarray  # the scans' points, stacked (M,2)
     free: FreeSpace | None = None  # built when a match first needs it (see LoopClosureSearch._seen_through)
 
 
@@ -447,7 +448,7 @@ class LoopClosureSearch:
         points = np.vstack([p for _, p in scans])
         built = _OldMap(CorrelativeReference.from_points(points, o.resolution_m),
                         NdtReference.from_points(points, o.ndt_cell_m, "widened"), self.map_covariance(old, keyframes),
-                        scans)
+                        scans, points)
         if not cache:
             return built
         self._cache[old] = built
@@ -474,9 +475,10 @@ class LoopClosureSearch:
         """The keyframes of the new map: ``new`` and the ones before it."""
         return range(max(0, new - self.options.new_map_keyframes), new + 1)
 
-    def _new_map(self, new: int, poses: np.ndarray) -> np.ndarray:
+    def _new_map(self, scans: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        """The new map's points (``scans`` placed by :meth:`_placed`), thinned to at most ``max_points``."""
         o = self.options
-        points = self._moved(self._new_range(new), poses, poses[new])
+        points = np.vstack([p for _, p in scans])
         voxel = o.resolution_m
         thinned = voxel_subsample(points, voxel)
         while len(thinned) > o.max_points:
@@ -494,27 +496,22 @@ class LoopClosureSearch:
             out.append((T[:2], self.points[k] @ np.array([[c, s], [-s, c]]) + T[:2]))
         return out
 
-    def _moved(self, keyframes: range, poses: np.ndarray, frame_pose: np.ndarray) -> np.ndarray:
-        """The points of ``keyframes`` moved into the frame of the pose ``frame_pose`` (estimate), stacked (M,2)."""
-        placed = self._placed(keyframes, poses, frame_pose)
-        return np.vstack([points for _, points in placed]) if placed else np.zeros((0, 2))
-
-    def _seen_through(self, old_map: _OldMap, new: int, poses: np.ndarray, T_old_new: np.ndarray) -> float:
+    def _seen_through(self, old_map: _OldMap, new_scans: list[tuple[np.ndarray, np.ndarray]],
+                      T_old_new: np.ndarray) -> float:
         """How much the two maps, matched at ``T_old_new``, contradict each other's free space: the smaller of the
         shares of each map's points that fall where the other's rays passed (see :mod:`bagtools.slam.freespace`).
         The smaller, because a world that changed between the visits (a door shut, a person passing) puts walls
-        in one map's free space, while a look-alike puts them in both."""
+        in one map's free space, while a look-alike puts them in both. ``new_scans``: the new map's, placed by
+        :meth:`_placed`."""
         resolution = self.options.resolution_m
         if old_map.free is None:
             old_map.free = FreeSpace.from_scans(old_map.scans, resolution)
-        new_scans = self._placed(self._new_range(new), poses, poses[new])
         new_free = FreeSpace.from_scans(new_scans, resolution)
         new_points = np.vstack([points for _, points in new_scans])
         c, s = math.cos(T_old_new[2]), math.sin(T_old_new[2])
         R = np.array([[c, s], [-s, c]])
-        old_points = np.vstack([points for _, points in old_map.scans])
         return min(old_map.free.seen_through(new_points @ R + T_old_new[:2]),
-                   new_free.seen_through((old_points - T_old_new[:2]) @ R.T))
+                   new_free.seen_through((old_map.points - T_old_new[:2]) @ R.T))
 
     def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float],
               guess: np.ndarray | None = None, kind: str = LOCAL) -> LoopCandidate:
@@ -536,7 +533,8 @@ class LoopClosureSearch:
             window = self.window(sigma)
         cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])), kind=kind)
         old_map = self._old_map(old, poses, cache=kind != GLOBAL)
-        current = self._new_map(new, poses)
+        new_scans = self._placed(self._new_range(new), poses, poses[new])
+        current = self._new_map(new_scans)
         reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
         search = dict(initial_pose=guess, search_range=window, angular_resolution_rad=self.angular_step(reach),
                       min_score=min_score)
@@ -569,7 +567,7 @@ class LoopClosureSearch:
         cand.score = float(grid.score)
         if ndt.score <= 0 or np.hypot(moved[0], moved[1]) > o.max_refine_m or abs(moved[2]) > o.max_refine_rad:
             cand.status = REFINE_FAILED
-        elif self._seen_through(old_map, new, poses, ndt.pose) > o.max_seen_through:
+        elif self._seen_through(old_map, new_scans, ndt.pose) > o.max_seen_through:
             cand.status = SEES_THROUGH
         else:
             cand.T_old_new = ndt.pose
