@@ -2,7 +2,9 @@
 
 A simulated bag carries its world geometry and simulator configuration as JSON in
 a std_msgs/String on ``/simulation/world``. Commands that can score their output
-against the truth (map-cloud, grid, ndt-odom) load it from here.
+against the truth (map-cloud, grid, ndt-odom) load it from here. The poses a bag
+records of its robot (a reference on ``/ground_truth``, a localizer's
+``/amcl_pose``) are read here too (:func:`read_poses`).
 """
 
 from __future__ import annotations
@@ -13,7 +15,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bagtools.errors import BagError
-from bagtools.io import ODOMETRY_TYPES, BagReader, decode_odometry
+from bagtools.io import (
+    ODOMETRY_TYPES, POSE_WITH_COVARIANCE_TYPES, BagReader, decode_odometry, decode_pose_with_covariance,
+)
 from bagtools.transforms import quat2tform, xyzw2quat
 
 if TYPE_CHECKING:
@@ -51,18 +55,25 @@ def load_sim_world(bag: BagReader) -> World | None:
 GROUND_TRUTH_MAX_SPEED_MPS, GROUND_TRUTH_JUMP_FLOOR_M = 20.0, 1.0
 
 
-def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
-                      warnings: list[str] | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
-    """The reference poses of a bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
+def read_poses(bag: BagReader, topic: str,
+               warnings: list[str] | None = None) -> tuple[np.ndarray, np.ndarray, str, str] | None:
+    """The poses recorded on ``topic``: (stamps_ns (N,), T_frame_body (N,4,4), frame id, child frame id ("" for a
+    PoseWithCovarianceStamped, which names none)), in stamp order, or None.
 
-    Read from nav_msgs/Odometry on ``topic`` (the pose of the base in map).
-    Samples with a non-finite value, a quaternion far from unit length or a
-    stamp seen before are dropped, and said in ``warnings`` when given, as are
-    jumps faster than ``GROUND_TRUTH_MAX_SPEED_MPS``; None when no sample is left.
+    Read from nav_msgs/Odometry (a reference, /ground_truth) or geometry_msgs/PoseWithCovarianceStamped (AMCL's
+    /amcl_pose). Samples with a non-finite value, a quaternion far from unit length or a stamp seen before are
+    dropped, and said in ``warnings`` when given; None when the topic has no such messages or no sample is left.
     """
-    if topic not in bag.topics or bag.topics[topic].msgtype not in ODOMETRY_TYPES:
+    if topic not in bag.topics:
         return None
-    samples = [decode_odometry(rec.msg) for rec in bag.messages([topic])]
+    msgtype = bag.topics[topic].msgtype
+    if msgtype in ODOMETRY_TYPES:
+        decode, child = decode_odometry, lambda s: s.child_frame_id
+    elif msgtype in POSE_WITH_COVARIANCE_TYPES:
+        decode, child = decode_pose_with_covariance, lambda s: ""
+    else:
+        return None
+    samples = [decode(rec.msg) for rec in bag.messages([topic])]
     if not samples:
         return None
     stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
@@ -78,19 +89,35 @@ def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
                         "1e6 m, not a unit quaternion, or a repeated stamp)")
     if order.size == 0:
         return None
-    if warnings is not None and order.size > 1:
-        step_m = np.linalg.norm(np.diff(xyz[order], axis=0), axis=1)
-        dt_s = np.diff(stamps[order]) / 1e9
+    T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))
+    T[:, :3, 3] = xyz[order]
+    return stamps[order], T, samples[0].frame_id, child(samples[0])
+
+
+def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,
+                      warnings: list[str] | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """The reference poses of a bag: (stamps_ns (N,), T_map_base (N,4,4), child frame id), or None.
+
+    Read from nav_msgs/Odometry on ``topic`` (the pose of the base in map), as :func:`read_poses` reads it;
+    jumps faster than ``GROUND_TRUTH_MAX_SPEED_MPS`` are said in ``warnings`` when given.
+    """
+    if topic not in bag.topics or bag.topics[topic].msgtype not in ODOMETRY_TYPES:
+        return None
+    poses = read_poses(bag, topic, warnings)
+    if poses is None:
+        return None
+    stamps, T, _, child = poses
+    if warnings is not None and len(stamps) > 1:
+        step_m = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)
+        dt_s = np.diff(stamps) / 1e9
         jumps = np.flatnonzero(step_m > GROUND_TRUTH_MAX_SPEED_MPS * dt_s + GROUND_TRUTH_JUMP_FLOOR_M)
         if jumps.size:
             k = int(jumps[np.argmax(step_m[jumps])])
             warnings.append(f"{topic}: the reference jumps {jumps.size} time(s), up to {step_m[k]:.3g} m in "
-                            f"{dt_s[k]:.3g} s (at {stamps[order][k + 1] / 1e9:.3f} s): faster than "
+                            f"{dt_s[k]:.3g} s (at {stamps[k + 1] / 1e9:.3f} s): faster than "
                             f"{GROUND_TRUTH_MAX_SPEED_MPS:g} m/s, no robot's motion; errors against it are not the "
                             "estimate's")
-    T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))
-    T[:, :3, 3] = xyz[order]
-    return stamps[order], T, samples[0].child_frame_id
+    return stamps, T, child
 
 
 def anchor_frame_in_map(T_map_base: np.ndarray, T_frame_base: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, int] | None:

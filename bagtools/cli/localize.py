@@ -46,8 +46,9 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
     localization.png (the map, the path, the first fix, lost and recovered
     places), summary.json (per-scan score and state, time to the first fix,
     lost and recovered counts), results.mcap (for Foxglove), and where the bag
-    has its own localization (map -> odom on /tf, e.g. AMCL's) bag_localizer.tum
-    and localizer_comparison.png: where the two part, and by how much;
+    has its own localization (AMCL's map -> odom on /tf, or its /amcl_pose)
+    bag_localizer.tum and localizer_comparison.png: where the two part, and by
+    how much;
     ground_truth.tum and both localizers' errors for simulated bags.
 
     \b

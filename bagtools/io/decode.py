@@ -20,6 +20,7 @@ from bagtools.errors import BagtoolsError
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
 POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
+POSE_WITH_COVARIANCE_TYPES = ("geometry_msgs/msg/PoseWithCovarianceStamped",)
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 
 # sensor_msgs/PointField datatypes -> numpy scalar kinds (byte order added later).
@@ -360,6 +361,32 @@ def decode_odometry(msg: Any) -> OdometrySample:
         angular_radps=np.array([w.x, w.y, w.z]),
         pose_covariance=np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6),
         twist_covariance=np.asarray(msg.twist.covariance, dtype=np.float64).reshape(6, 6),
+    )
+
+
+@dataclass(frozen=True)
+class PoseSample:
+    """A geometry_msgs/PoseWithCovarianceStamped (AMCL's ``/amcl_pose``): the pose of the robot in ``frame_id``.
+
+    ``position_m`` (3,), ``orientation_xyzw`` (4,) ROS order, ``covariance`` (6,6) row-major as in the message.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    position_m: np.ndarray
+    orientation_xyzw: np.ndarray
+    covariance: np.ndarray
+
+
+def decode_pose_with_covariance(msg: Any) -> PoseSample:
+    """geometry_msgs/PoseWithCovarianceStamped -> :class:`PoseSample`."""
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    return PoseSample(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        frame_id=msg.header.frame_id,
+        position_m=np.array([p.x, p.y, p.z]),
+        orientation_xyzw=np.array([q.x, q.y, q.z, q.w]),
+        covariance=np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6),
     )
 
 

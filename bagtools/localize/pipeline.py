@@ -7,7 +7,7 @@
                           then the tracked poses smoothed with the laser odometry and the revisits (a place seen
                           again, matched scans to scans) in one pose graph (bagtools.localize.smoother), the map
                           matches weighed by their scores and held less their offset from the base (map_offset)
-        _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf), where it has one
+        _bag_localizer()  the bag's own map -> base (AMCL's map -> odom on /tf, or its /amcl_pose), where it has one
         _evaluate()       against /ground_truth (simulated bags): our error and the bag localizer's
         _summary()        per-scan scores and states, first fix, lost and recovered, the comparison
 
@@ -26,19 +26,21 @@ import numpy as np
 
 from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
-from bagtools.io import open_bag
+from bagtools.io import BagReader, open_bag
 from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
 from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
 from bagtools.progress import progress
-from bagtools.simtruth import read_ground_truth
+from bagtools.simtruth import read_ground_truth, read_poses
 from bagtools.slam.evaluate import ape_aligned
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation
 from bagtools.transforms import pose2tform, se2_between, tform2pose, wrap_to_pi
 
 MAP_FRAME = "map"
+#: Where a bag with no map -> odom on /tf may record its localizer's pose (nav2's and ROS 1's AMCL).
+AMCL_POSE_TOPIC = "/amcl_pose"
 #: Where our poses and the bag's own localizer part by more than this (m, deg), the comparison says so.
 PART_M, PART_DEG = 0.3, 10.0
 
@@ -103,13 +105,14 @@ class LocalizePipeline:
         self.revisits = 0  # revisit factors the smoother joined (bagtools.localize.smoother.revisit_factors)
         self.timing_s: dict = {}  # seconds of each part of _localize (summary.json: timing_s)
         self.map_offset: np.ndarray | None = None  # the map matches' offset from the base (smoother.map_offset)
+        self.bag_localizer_source = ""  # where the bag's own localization was read (summary.json: bag_localizer)
 
     def run(self) -> LocalizeResult:
         nav2_map = read_nav2_map(self.map_yaml)
         with open_bag(self.bag_path) as bag:
             dataset, inputs = self._read(bag)
             localizer, tracked, elapsed_s = self._localize(nav2_map, dataset, inputs)
-            own = self._bag_localizer(dataset, inputs)
+            own = self._bag_localizer(bag, dataset, inputs)
             truth = self._ground_truth(bag, dataset)
         self.warnings = list(dict.fromkeys(dataset.warnings + self.warnings))
         stamps = inputs.stamps_ns
@@ -188,13 +191,37 @@ class LocalizePipeline:
                          "smoothing": t3 - t2, "total": t3 - t0}
         return localizer, poses, t3 - t0
 
-    def _bag_localizer(self, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
-        """The bag's own map -> base at the scan stamps (its localizer's map -> odom on /tf, composed), or None."""
+    def _bag_localizer(self, bag: BagReader, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
+        """The bag's own map -> base at the scan stamps, or None: its localizer's map -> odom on /tf, composed with
+        tf; else its /amcl_pose, carried between AMCL's updates by the odometry (AMCL holds its map -> odom from
+        one update to the next: T_map_base(t) = T_map_base(k) T_odom_base(k)^-1 T_odom_base(t), k the last update
+        at or before t)."""
         buffer, base = dataset.buffer, dataset.base_frame
-        if buffer is None or base is None or not buffer.has_frame(MAP_FRAME) or not buffer.can_transform(MAP_FRAME, base):
+        if (buffer is not None and base is not None and buffer.has_frame(MAP_FRAME)
+                and buffer.can_transform(MAP_FRAME, base)):
+            T, ok = buffer.lookup(MAP_FRAME, base, inputs.stamps_ns, return_mask=True)
+            self.bag_localizer_source = f"/tf {MAP_FRAME} -> {base}"
+            return Trajectory(inputs.stamps_ns[ok], T[ok]) if ok.any() else None
+        amcl = read_poses(bag, AMCL_POSE_TOPIC, self.warnings)
+        if amcl is None:
             return None
-        T, ok = buffer.lookup(MAP_FRAME, base, inputs.stamps_ns, return_mask=True)
-        return Trajectory(inputs.stamps_ns[ok], T[ok]) if ok.any() else None
+        stamps, T_map_base, frame, _ = amcl
+        odom = dataset.odom_frame
+        if buffer is None or base is None or not buffer.can_transform(odom, base):
+            self.warnings.append(f"{AMCL_POSE_TOPIC} not compared: tf has no {odom} -> base to carry it between "
+                                 "its updates")
+            return None
+        if frame.lstrip("/") != MAP_FRAME:
+            self.warnings.append(f"{AMCL_POSE_TOPIC} is in frame '{frame}', not '{MAP_FRAME}': compared as if it were")
+        T_odom_base, known = buffer.lookup(odom, base, stamps, return_mask=True)
+        stamps, T_map_odom = stamps[known], T_map_base[known] @ np.linalg.inv(T_odom_base[known])
+        k = np.searchsorted(stamps, inputs.stamps_ns, side="right") - 1
+        after = np.flatnonzero(k >= 0)
+        T_now, ok = buffer.lookup(odom, base, inputs.stamps_ns[after], return_mask=True)
+        if not ok.any():
+            return None
+        self.bag_localizer_source = f"{AMCL_POSE_TOPIC}, held between updates by {odom} -> {base}"
+        return Trajectory(inputs.stamps_ns[after[ok]], T_map_odom[k[after[ok]]] @ T_now[ok])
 
     def _ground_truth(self, bag, dataset: NdtOdomPipeline) -> Trajectory | None:
         """The simulator's /ground_truth of the base (map frame), or None."""
@@ -272,7 +299,7 @@ class LocalizePipeline:
         """Our poses against the bag's own localizer's over time, and where they part (see PART_M, PART_DEG)."""
         common, a, b = np.intersect1d(ours.stamps_ns, theirs.stamps_ns, return_indices=True)
         if common.size == 0:
-            return {"scans_compared": 0}
+            return {"source": self.bag_localizer_source, "scans_compared": 0}
         d = se2_between(tform2pose(theirs.poses[b]), tform2pose(ours.poses[a]))
         dist, heading = np.hypot(d[:, 0], d[:, 1]), np.degrees(np.abs(d[:, 2]))
         apart = (dist > PART_M) | (heading > PART_DEG)
@@ -285,7 +312,8 @@ class LocalizePipeline:
         if parts:
             self.warnings.append(f"the bag's own localizer and ours part by more than {PART_M} m or {PART_DEG} deg "
                                  f"in {len(parts)} stretch(es), first at {parts[0]['from_ns'] * 1e-9:.2f} s")
-        return {"scans_compared": int(common.size), "translation_m": ErrorStats.of(dist).as_dict(),
+        return {"source": self.bag_localizer_source, "scans_compared": int(common.size),
+                "translation_m": ErrorStats.of(dist).as_dict(),
                 "heading_deg": ErrorStats.of(heading).as_dict(), "threshold": {"m": PART_M, "deg": PART_DEG},
                 "parts": parts, "difference": {"stamp_ns": [int(s) for s in common],
                                                "translation_m": [round(float(v), 4) for v in dist],

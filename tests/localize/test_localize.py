@@ -134,6 +134,70 @@ def test_the_command_writes_its_files_and_refuses_to_overwrite(world: dict, tmp_
     assert again.value.code == 2 and "already exists" in err and "Traceback" not in err
 
 
+def _without_map_to_odom_with_amcl_pose(bag: Path, out: Path, T_map_base, every: int = 3,
+                                        dropped: tuple[str, ...] = ("odom",)) -> Path:
+    """``bag`` again without /tf's map -> odom (the transforms to the ``dropped`` children), with a
+    geometry_msgs/PoseWithCovarianceStamped on /amcl_pose at every ``every``-th stamp of the Trajectory
+    ``T_map_base``: as a bag recorded from AMCL's pose topic alone."""
+    from rosbags.highlevel import AnyReader
+
+    from bagtools.transforms import rotm2quat
+    from tests.conftest import TYPESTORE, _header, write_bag
+
+    T = TYPESTORE.types
+    messages = []
+    with AnyReader([bag]) as reader:
+        for conn, t_ns, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == "/tf":
+                msg.transforms = [ts for ts in msg.transforms if ts.child_frame_id not in dropped]
+                if not msg.transforms:
+                    continue
+            messages.append((conn.topic, conn.msgtype, t_ns, msg))
+    for stamp, pose in zip(T_map_base.stamps_ns[::every], T_map_base.poses[::every]):
+        w, x, y, z = rotm2quat(pose[:3, :3])
+        covariance = np.zeros(36)
+        messages.append(("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", int(stamp) + 5_000_000,
+                         T["geometry_msgs/msg/PoseWithCovarianceStamped"](
+                             header=_header(int(stamp), "map"), pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                                 pose=T["geometry_msgs/msg/Pose"](
+                                     position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
+                                     orientation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)),
+                                 covariance=covariance))))
+    messages.sort(key=lambda m: m[2])
+    return write_bag(out, messages)
+
+
+def test_a_bag_with_only_amcl_pose_has_its_localizer_compared_through_it(world: dict, tmp_path: Path) -> None:
+    """AMCL publishes its pose on /amcl_pose at each update, and map -> odom on /tf. A bag recorded without the
+    latter is compared through the former, held between updates by the odometry, as AMCL holds its map -> odom."""
+    with_tf = LocalizePipeline(world["bag"], world["map"]).run()
+    assert with_tf.summary["bag_localizer"]["source"] == "/tf map -> base_footprint"
+    bag = _without_map_to_odom_with_amcl_pose(world["bag"], tmp_path / "amcl", with_tf.bag_localizer)
+    result = LocalizePipeline(bag, world["map"]).run()
+    compared = result.summary["bag_localizer"]
+    assert compared["source"].startswith("/amcl_pose")
+    assert compared["scans_compared"] >= with_tf.summary["bag_localizer"]["scans_compared"] - 3
+    # the same poses wherever the simulator's localizer made no update between two of the /amcl_pose samples
+    # (its map -> odom held, as ours is); elsewhere apart by that update's correction, a few centimetres
+    common, a, b = np.intersect1d(result.bag_localizer.stamps_ns, with_tf.bag_localizer.stamps_ns,
+                                  return_indices=True)
+    apart = np.linalg.norm(result.bag_localizer.poses[a, :2, 3] - with_tf.bag_localizer.poses[b, :2, 3], axis=1)
+    assert common.size > 250 and np.median(apart) < 1e-6 and apart.max() < 0.3, (np.median(apart), apart.max())
+    assert abs(compared["translation_m"]["mean"] - with_tf.summary["bag_localizer"]["translation_m"]["mean"]) < 0.01
+    assert result.summary["ground_truth"]["bag_localizer"]["ape_m"]["rmse"] < 0.1
+
+
+def test_amcl_pose_without_odometry_to_carry_it_is_said_not_compared(world: dict, tmp_path: Path) -> None:
+    """Without odom -> base in tf, AMCL's pose cannot be carried between its updates: said, and not compared."""
+    with_tf = LocalizePipeline(world["bag"], world["map"]).run()
+    bag = _without_map_to_odom_with_amcl_pose(world["bag"], tmp_path / "amcl", with_tf.bag_localizer,
+                                              dropped=("odom", "base_footprint"))
+    result = LocalizePipeline(bag, world["map"], LocalizeOptions(use_odometry=False)).run()
+    assert "bag_localizer" not in result.summary and result.bag_localizer is None
+    assert any(w.startswith("/amcl_pose not compared") for w in result.summary["warnings"]), result.summary["warnings"]
+
+
 def _bare_room_map(directory: Path) -> Path:
     directory.mkdir()
     image = np.full((120, 200), 254, dtype=np.uint8)
