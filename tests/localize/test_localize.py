@@ -135,7 +135,7 @@ def test_the_command_writes_its_files_and_refuses_to_overwrite(world: dict, tmp_
 
 
 def _without_map_to_odom_with_amcl_pose(bag: Path, out: Path, T_map_base, every: int = 3,
-                                        dropped: tuple[str, ...] = ("odom",)) -> Path:
+                                        dropped: tuple[str, ...] = ("odom",), frame: str = "map") -> Path:
     """``bag`` again without /tf's map -> odom (the transforms to the ``dropped`` children), with a
     geometry_msgs/PoseWithCovarianceStamped on /amcl_pose at every ``every``-th stamp of the Trajectory
     ``T_map_base``: as a bag recorded from AMCL's pose topic alone."""
@@ -159,7 +159,7 @@ def _without_map_to_odom_with_amcl_pose(bag: Path, out: Path, T_map_base, every:
         covariance = np.zeros(36)
         messages.append(("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", int(stamp) + 5_000_000,
                          T["geometry_msgs/msg/PoseWithCovarianceStamped"](
-                             header=_header(int(stamp), "map"), pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                             header=_header(int(stamp), frame), pose=T["geometry_msgs/msg/PoseWithCovariance"](
                                  pose=T["geometry_msgs/msg/Pose"](
                                      position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
                                      orientation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)),
@@ -186,6 +186,15 @@ def test_a_bag_with_only_amcl_pose_has_its_localizer_compared_through_it(world: 
     assert common.size > 250 and np.median(apart) < 1e-6 and apart.max() < 0.3, (np.median(apart), apart.max())
     assert abs(compared["translation_m"]["mean"] - with_tf.summary["bag_localizer"]["translation_m"]["mean"]) < 0.01
     assert result.summary["ground_truth"]["bag_localizer"]["ape_m"]["rmse"] < 0.1
+
+
+def test_amcl_pose_in_another_frame_is_said(world: dict, tmp_path: Path) -> None:
+    """An /amcl_pose not in the map's frame is compared as if it were, and said."""
+    with_tf = LocalizePipeline(world["bag"], world["map"]).run()
+    bag = _without_map_to_odom_with_amcl_pose(world["bag"], tmp_path / "amcl", with_tf.bag_localizer, frame="world")
+    result = LocalizePipeline(bag, world["map"]).run()
+    assert result.summary["bag_localizer"]["source"].startswith("/amcl_pose")
+    assert any("/amcl_pose is in frame 'world'" in w for w in result.summary["warnings"]), result.summary["warnings"]
 
 
 def test_amcl_pose_without_odometry_to_carry_it_is_said_not_compared(world: dict, tmp_path: Path) -> None:
