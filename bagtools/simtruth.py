@@ -67,12 +67,9 @@ def read_poses(bag: BagReader, topic: str,
     if topic not in bag.topics:
         return None
     msgtype = bag.topics[topic].msgtype
-    if msgtype in ODOMETRY_TYPES:
-        decode, child = decode_odometry, lambda s: s.child_frame_id
-    elif msgtype in POSE_WITH_COVARIANCE_TYPES:
-        decode, child = decode_pose_with_covariance, lambda s: ""
-    else:
+    if msgtype not in ODOMETRY_TYPES + POSE_WITH_COVARIANCE_TYPES:
         return None
+    decode = decode_odometry if msgtype in ODOMETRY_TYPES else decode_pose_with_covariance
     samples = [decode(rec.msg) for rec in bag.messages([topic])]
     if not samples:
         return None
@@ -91,7 +88,7 @@ def read_poses(bag: BagReader, topic: str,
         return None
     T = quat2tform(xyzw2quat(q[order] / np.linalg.norm(q[order], axis=1, keepdims=True)))
     T[:, :3, 3] = xyz[order]
-    return stamps[order], T, samples[0].frame_id, child(samples[0])
+    return stamps[order], T, samples[0].frame_id, getattr(samples[0], "child_frame_id", "")
 
 
 def read_ground_truth(bag: BagReader, topic: str = GROUND_TRUTH_TOPIC,

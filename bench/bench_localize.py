@@ -198,9 +198,9 @@ def _simulated_rows(quick: bool) -> list[Row]:
         n_starts = 20 if quick else 100
         mirrored = np.column_stack([-truth[:, 0], -truth[:, 1], truth[:, 2] + math.pi])  # the world's twin
         for name, map_yaml in maps.items():
-            to_map = _world_to_map(lap, lap_slam.trajectory) if name == "SLAM map" else (np.eye(2), np.zeros(2))
-            rows += _start_rows(name, read_nav2_map(map_yaml), inputs, odom, _moved(truth, *to_map),
-                                _moved(mirrored, *to_map), n_starts)
+            to_map = _world_to_map(lap, lap_slam.trajectory) if name == "SLAM map" else np.zeros(3)
+            rows += _start_rows(name, read_nav2_map(map_yaml), inputs, odom, se2_compose(to_map, truth),
+                                se2_compose(to_map, mirrored), n_starts)
         nav2 = read_nav2_map(maps["ground-truth grid"])
         points = nav2.occupied_points()
         k0 = 120  # 24 s into the figure eight, 2.5 m from where it is 28 s later
@@ -262,10 +262,9 @@ def _start_rows(name: str, nav2, inputs, odom: np.ndarray, truth: np.ndarray, tw
             "no localizer can fix these within 2 s")]
 
 
-def _world_to_map(bag: Path, trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R (2, 2) and translation t (2,) taking the simulated world's coordinates into the frame of a
-    map made from ``bag`` along ``trajectory`` (its base in the map): the best planar fit of the trajectory onto
-    the bag's /ground_truth."""
+def _world_to_map(bag: Path, trajectory) -> np.ndarray:
+    """The simulated world's frame in the frame of a map made from ``bag`` along ``trajectory`` (its base in the
+    map): [x, y, theta], the best planar fit of the trajectory onto the bag's /ground_truth."""
     from bagtools.io import open_bag
     from bagtools.simtruth import read_ground_truth
     from bagtools.slam.evaluate import align_se2
@@ -275,12 +274,8 @@ def _world_to_map(bag: Path, trajectory) -> tuple[np.ndarray, np.ndarray]:
     with open_bag(bag) as reader:
         stamps, T, _ = read_ground_truth(reader)
     world, ours = associate(Trajectory(stamps, T), trajectory)
-    return align_se2(world.positions[:, :2], ours.positions[:, :2])
-
-
-def _moved(poses: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Poses (N, 3) [x, y, theta] moved by the planar rigid transform (R, t)."""
-    return np.column_stack([poses[:, :2] @ R.T + t, poses[:, 2] + math.atan2(R[1, 0], R[0, 0])])
+    R, t = align_se2(world.positions[:, :2], ours.positions[:, :2])
+    return np.array([t[0], t[1], math.atan2(R[1, 0], R[0, 0])])
 
 
 def _twin_alike(localizer, inputs, truth: np.ndarray, twin: np.ndarray, start: int, deadline: int) -> bool:
