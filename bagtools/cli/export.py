@@ -27,12 +27,16 @@ def export(bag: str, topic: str, out: str, force: bool, keep_nan: bool) -> None:
     qx qy qz qw, vx vy vz wx wy wz and the covariances; TF child_frame_id,
     x y z qx qy qz qw; PointStamped x y z. Any other type (Imu, JointState,
     CompressedImage, custom messages) is flattened from its definition: nested
-    fields as a.b.c columns, numeric arrays as lists, byte arrays as their
+    fields as a.b.c columns, numeric arrays as lists, byte sequences as their
     length (NAME.bytes), string arrays and arrays of messages as JSON text; a
-    message without a header has its bag time as stamp_ns. Lists are list columns in Parquet,
-    2-D arrays in NPZ and numbered columns (ranges.0, ranges.1, ...) in CSV.
-    NPZ is compressed, and a text column that repeats (frame_id) is stored
-    once: NAME holds each row's index into NAME.values.
+    message without a header has its bag time as stamp_ns (a field named like
+    one of the first three columns is written as msg.NAME). Every value is
+    exact, in its field's own type (int8 ... uint64, float32, float64, bool).
+    Lists are list columns in Parquet, 2-D arrays in NPZ (varying lengths
+    padded, with NAME.length) and numbered columns (ranges.0, ranges.1, ...) in
+    CSV. NPZ is compressed, and a text column that repeats (frame_id) is
+    stored once: NAME holds each row's index into NAME.values; a few long
+    texts: NAME.utf8 and NAME.offsets.
 
     \b
     Example:
@@ -47,5 +51,9 @@ def export(bag: str, topic: str, out: str, force: bool, keep_nan: bool) -> None:
     summary = export_topic(bag, topic, out, force, keep_nan=keep_nan)
     for warning in summary.warnings:
         click.echo(f"bagtools: warning: {warning}", err=True)
+    lists = ""
+    if summary.list_columns:
+        spread = " (each over NAME.0, NAME.1, ...)" if summary.format == "csv" else ""
+        lists = f"; lists: {' '.join(summary.list_columns)}{spread}"
     click.echo(f"{summary.messages} {summary.msgtype} messages on {topic}: {summary.rows} rows, columns "
-               f"{' '.join(summary.columns)} in {out}")
+               f"{' '.join(summary.columns)}{lists} in {out}")

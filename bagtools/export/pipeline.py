@@ -7,7 +7,7 @@ from functools import partial
 from pathlib import Path
 
 from bagtools.errors import BagtoolsError, TopicError
-from bagtools.export.sinks import FORMATS, close_quietly, open_sink
+from bagtools.export.sinks import FORMATS, close_quietly, is_ragged, open_sink
 from bagtools.export.tables import ROWS, message_rows, pointcloud2_rows
 from bagtools.io import open_bag
 from bagtools.outputs import atomic_path, check_writable
@@ -16,7 +16,8 @@ from bagtools.progress import progress
 
 @dataclass
 class ExportSummary:
-    """What was written: messages read, rows, the columns (list columns as ``name[]``) and warnings."""
+    """What was written: messages read, rows, the columns (as the file names them; in CSV a list column NAME is
+    spread over NAME.0, NAME.1, ...), which of them hold lists, and warnings."""
 
     path: Path
     format: str
@@ -24,6 +25,7 @@ class ExportSummary:
     messages: int = 0
     rows: int = 0
     columns: list[str] = field(default_factory=list)
+    list_columns: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -52,7 +54,7 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
         if info.count == 0:
             raise TopicError(f"topic '{topic}' ({info.msgtype}) has no messages, so there is nothing to export",
                              bag.path)
-        rows_of = ROWS.get(info.msgtype, message_rows)  # any other type: flattened from its definition
+        rows_of = ROWS.get(info.msgtype) or partial(message_rows, definitions=bag.field_definitions)
         if rows_of is pointcloud2_rows:
             rows_of = partial(pointcloud2_rows, keep_nan=keep_nan)
         summary = ExportSummary(out, fmt, info.msgtype)
@@ -62,9 +64,9 @@ def export_topic(bag_path: str | Path, topic: str, out: str | Path, force: bool 
                 for rec in progress(bag.messages([topic]), total=info.count, desc="exporting", unit="msg"):
                     chunk = rows_of(rec)
                     if not summary.columns:
-                        summary.columns = [name + ("[]" if column.ndim == 2 or column.dtype == object
-                                                   and len(column) and not isinstance(column[0], str) else "")
-                                           for name, column in chunk.items()]
+                        summary.columns = list(chunk)
+                        summary.list_columns = [name for name, column in chunk.items()
+                                                if column.ndim == 2 or is_ragged(column)]
                     sink.write(chunk)
                     summary.messages += 1
                     summary.rows += len(chunk["stamp_ns"])

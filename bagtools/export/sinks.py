@@ -1,12 +1,17 @@
 """Table files, written a chunk of rows at a time: CSV (csv module), Parquet (pyarrow) and NPZ (numpy).
 
+Every value is written exactly, in its column's own type (int64 and uint64 as
+integers, float32 and float64 at their own precision, NaN and infinities kept;
+CSV writes each float in the shortest text that reads back to the same value).
+
 List columns (a scan's ranges, an odometry covariance): Parquet keeps them as
-list columns and NPZ as 2-D arrays (ragged lists padded with NaN); CSV
-spreads them over numbered columns ``ranges.0``, ``ranges.1``, ... as wide as
-the first row's list (shorter lists leave empty cells; a longer one is refused:
-use Parquet or NPZ for scans whose beam count changes). Columns are fixed by
-the first chunk; a later message without one of them gets an empty value (NaN
-in NPZ).
+list columns and NPZ as 2-D arrays; a list whose length varies from row to row
+is padded (NaN for floats, 0 for integers and False for booleans) and its
+lengths are in ``NAME.length``. CSV spreads them over numbered columns
+``ranges.0``, ``ranges.1``, ... as wide as the first row's list (shorter lists
+leave empty cells; a longer one is refused: use Parquet or NPZ for scans
+whose beam count changes). Columns are fixed by the first chunk; a later
+message without one of them gets an empty value (NaN in NPZ).
 """
 
 from __future__ import annotations
@@ -32,7 +37,8 @@ class Sink(Protocol):
     def close(self) -> None: ...
 
 
-def _is_ragged(column: np.ndarray) -> bool:
+def is_ragged(column: np.ndarray) -> bool:
+    """A column of lists whose length may vary (an object array of 1-D arrays)."""
     return column.dtype == object and column.ndim == 1 and column.size > 0 and isinstance(column[0], np.ndarray)
 
 
@@ -42,7 +48,7 @@ def _rows(chunk: Chunk) -> int:
 
 def _fill(template: np.ndarray, n: int) -> np.ndarray:
     """n empty values shaped like a column: NaN for floats, 0 for integers, '' for strings, empty lists."""
-    if _is_ragged(template):
+    if is_ragged(template):
         out = np.empty(n, dtype=object)
         for i in range(n):
             out[i] = np.empty(0, dtype=template[0].dtype)
@@ -91,14 +97,14 @@ class CsvSink:
         if not self._widths:
             header = []
             for name, column in chunk.items():
-                width = len(column[0]) if _is_ragged(column) else (column.shape[1] if column.ndim == 2 else 0)
+                width = len(column[0]) if is_ragged(column) else (column.shape[1] if column.ndim == 2 else 0)
                 self._widths[name] = width
-                header += [f"{name}.{i}" for i in range(width)] if column.ndim == 2 or _is_ragged(column) else [name]
+                header += [f"{name}.{i}" for i in range(width)] if column.ndim == 2 or is_ragged(column) else [name]
             self._writer.writerow(header)
         cells: list[list] = []
         for name, column in chunk.items():
             width = self._widths[name]
-            if _is_ragged(column):
+            if is_ragged(column):
                 cells += self._ragged(name, column, width)
             elif column.ndim == 2:
                 cells += [_text(column[:, i]) for i in range(column.shape[1])]
@@ -111,17 +117,16 @@ class CsvSink:
         if max(lengths, default=0) > width:
             raise BagtoolsError(f"a message has {max(lengths)} values in {name}, more than the {width} of the first: "
                                 "CSV columns are fixed by the first message; export to .parquet or .npz instead")
-        table = np.full((len(column), width), np.nan, dtype=column[0].dtype)
-        for i, values in enumerate(column):
-            table[i, :len(values)] = values
-        return [[text if j < n else "" for text, n in zip(_text(table[:, j]), lengths)] for j in range(width)]
+        rows = [_text(values) + [""] * (width - len(values)) for values in column]
+        return [list(cells) for cells in zip(*rows)] if rows and width else [[] for _ in range(width)]
 
     def close(self) -> None:
         self._file.close()
 
 
 def _text(column: np.ndarray) -> list:
-    """Cell values: float32 in their shortest decimal form, everything else as Python values."""
+    """Cell values: float32 in their shortest decimal form, everything else as Python values (float64 in its
+    shortest round-trip form, integers exactly)."""
     if column.dtype == np.float32:
         return column.astype(str).tolist()
     return column.tolist()
@@ -172,11 +177,11 @@ class ParquetSink:
 def _arrow_column(parts: list[np.ndarray]):
     import pyarrow as pa
 
-    if _is_ragged(parts[0]):
+    if is_ragged(parts[0]):
         lists = [v for part in parts for v in part]
         offsets = np.zeros(len(lists) + 1, dtype=np.int64)
         np.cumsum([len(v) for v in lists], out=offsets[1:])
-        values = np.concatenate(lists) if lists else np.empty(0, dtype=np.float32)
+        values = np.concatenate(lists) if lists else np.empty(0, dtype=parts[0][0].dtype)
         return pa.LargeListArray.from_arrays(pa.array(offsets), pa.array(values))
     column = np.concatenate(parts)
     if column.ndim == 2:
@@ -188,8 +193,12 @@ def _arrow_column(parts: list[np.ndarray]):
 
 class NpzSink:
     """NPZ (numpy, compressed), one array per column, loadable without pickle; built in memory, written at the end.
-    A text column whose values repeat is stored once: ``NAME`` holds each row's index into ``NAME.values``
-    (``npz["frame_id.values"][npz["frame_id"]]`` gives the column back)."""
+
+    Text columns take one of three forms, the smallest that holds them: a fixed-width string array ``NAME``; when
+    values repeat, each stored once: ``NAME`` holds each row's index into ``NAME.values``
+    (``npz["frame_id.values"][npz["frame_id"]]`` gives the column back); when a few long texts would pad every
+    row to their width, ``NAME.utf8`` (the texts' UTF-8 bytes, one after another) and ``NAME.offsets`` (int64,
+    rows + 1: row i is ``utf8[offsets[i]:offsets[i + 1]]``)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -203,28 +212,46 @@ class NpzSink:
     def close(self) -> None:
         arrays: dict[str, np.ndarray] = {}
         for name, parts in self._parts.items():
-            column = _numpy_column(parts)
-            if column.dtype.kind == "U" and column.size:  # text: each distinct value once, rows index them
-                values, index = np.unique(column, return_inverse=True)
-                if values.size <= column.size // 2:
-                    arrays[name] = index.astype(np.int32 if values.size > 32_767 else np.int16)
-                    arrays[f"{name}.values"] = values
-                    continue
-            arrays[name] = column
+            if is_ragged(parts[0]):
+                arrays[name], lengths = _padded(parts)
+                if lengths.size and (lengths != lengths[0]).any():
+                    arrays[f"{name}.length"] = lengths
+                continue
+            column = np.concatenate(parts)
+            if column.dtype == object:
+                arrays.update(_text_arrays(name, column))
+            else:
+                arrays[name] = column
         with open(self.path, "wb") as f:
             np.savez_compressed(f, **arrays)
 
 
-def _numpy_column(parts: list[np.ndarray]) -> np.ndarray:
-    if _is_ragged(parts[0]):
-        lists = [v for part in parts for v in part]
-        width = max((len(v) for v in lists), default=0)
-        out = np.full((len(lists), width), np.nan, dtype=lists[0].dtype if lists else np.float32)
-        for i, values in enumerate(lists):
-            out[i, :len(values)] = values
-        return out
-    column = np.concatenate(parts)
-    return column.astype(str) if column.dtype == object else column
+def _padded(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Ragged lists as one 2-D array (padded with NaN, 0 or False) and each row's length."""
+    lists = [v for part in parts for v in part]
+    lengths = np.array([len(v) for v in lists], dtype=np.int64)
+    dtype = parts[0][0].dtype
+    out = np.full((len(lists), int(lengths.max(initial=0))), np.nan if dtype.kind == "f" else 0, dtype=dtype)
+    for i, values in enumerate(lists):
+        out[i, :len(values)] = values
+    return out, lengths
+
+
+def _text_arrays(name: str, column: np.ndarray) -> dict[str, np.ndarray]:
+    """A text column in the smallest of its three forms (see :class:`NpzSink`)."""
+    encoded = [str(v).encode("utf-8") for v in column]
+    lengths = np.array([len(b) for b in encoded], dtype=np.int64)
+    padded_bytes = 4 * column.size * int(lengths.max(initial=0))  # a fixed-width array: 4 bytes per character
+    if padded_bytes > 4 * int(lengths.sum()) + (1 << 20):  # mostly padding: a few long texts
+        offsets = np.zeros(column.size + 1, dtype=np.int64)
+        np.cumsum(lengths, out=offsets[1:])
+        return {f"{name}.utf8": np.frombuffer(b"".join(encoded), dtype=np.uint8), f"{name}.offsets": offsets}
+    text = column.astype(str)
+    if text.size:
+        values, index = np.unique(text, return_inverse=True)
+        if values.size <= text.size // 2:  # values repeat: each stored once, rows index them
+            return {name: index.astype(np.int32 if values.size > 32_767 else np.int16), f"{name}.values": values}
+    return {name: text}
 
 
 class Batched:

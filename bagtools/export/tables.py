@@ -14,12 +14,16 @@ message's fields flattened:
 - TF (tf2_msgs/TFMessage, ROS 1 tf/tfMessage): one row per transform:
   ``child_frame_id`` (``frame_id`` is the parent), ``x y z qx qy qz qw``;
 - PointStamped: ``x y z``;
-- any other type (:func:`message_rows`), flattened from its definition: one
-  row per message, nested fields as ``a.b.c`` columns, numeric arrays as lists,
-  byte arrays (uint8/int8: image data, compressed or not) as their length in
-  ``NAME.bytes``, string arrays and arrays of messages as JSON text. A
+- any other type (:func:`message_rows`), flattened from its definition as the
+  bag declares it: one row per message, nested fields as ``a.b.c`` columns,
+  every number exactly, in its field's own type (bool, int8 ... uint64,
+  float32, float64: :data:`PRIMITIVE_DTYPES`), fixed-size arrays as
+  fixed-length lists, sequences as lists, except sequences of bytes
+  (uint8/int8/byte/char: image data, compressed or not) as their length in
+  ``NAME.bytes``, and string arrays and arrays of messages as JSON text. A
   message without a header has its bag time as ``stamp_ns`` and an empty
-  ``frame_id``.
+  ``frame_id``; a field named like one of these three columns is written as
+  ``msg.NAME``.
 
 A chunk is ``{column: array}``: 1-D arrays (one value per row), 2-D arrays
 (a fixed-length list per row) or object arrays of 1-D arrays (lists whose
@@ -34,6 +38,7 @@ from dataclasses import fields, is_dataclass
 from typing import Any
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, POINTCLOUD2_TYPES, TF_TYPES, Record, decode_laserscan, decode_odometry,
@@ -66,8 +71,9 @@ def laserscan_rows(rec: Record) -> Chunk:
 
 
 def _one_list(values: np.ndarray) -> np.ndarray:
+    """One row holding the list ``values`` (its own dtype)."""
     out = np.empty(1, dtype=object)
-    out[0] = np.asarray(values, dtype=np.float32)
+    out[0] = np.asarray(values)
     return out
 
 
@@ -123,40 +129,61 @@ def pointstamped_rows(rec: Record) -> Chunk:
     return chunk
 
 
-def message_rows(rec: Record) -> Chunk:
-    """One row per message of any type, from its definition (see the module docstring)."""
+#: A ROS primitive type -> the numpy dtype its values are exported in (rosbags' own: ``byte`` is signed, as
+#: rosbags deserializes it, ``char`` unsigned).
+PRIMITIVE_DTYPES: dict[str, type] = {
+    "bool": np.bool_, "byte": np.int8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8, "int16": np.int16,
+    "uint16": np.uint16, "int32": np.int32, "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64,
+    "float32": np.float32, "float64": np.float64,
+}
+#: Sequences (variable length) of these are binary data (an image, a cloud's bytes): exported as their length.
+BYTE_TYPES = ("byte", "char", "int8", "uint8")
+#: The export's own columns, which come first in every table; a message field of the same name is written as
+#: ``msg.NAME`` so that it cannot overwrite them.
+OWN_COLUMNS = ("stamp_ns", "log_time_ns", "frame_id")
+
+Definitions = Callable[[str], tuple[list, list]]
+"""Message type -> rosbags' (constants, fields) of its definition (:meth:`bagtools.io.BagReader.field_definitions`)."""
+
+
+def message_rows(rec: Record, definitions: Definitions) -> Chunk:
+    """One row per message of any type, flattened from its definition (see the module docstring): every value in
+    its field's own dtype."""
     msg = rec.msg
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
     chunk = _head(1, stamp_to_ns(stamp) if stamp is not None else rec.log_time_ns, rec.log_time_ns,
                   str(getattr(header, "frame_id", "")) if header is not None else "")
-    for name, value in _flatten(msg, "", skip="header" if stamp is not None else None):
+    for name, value in _flatten(msg, rec.msgtype, "", definitions, skip="header" if stamp is not None else None):
+        while name in chunk:  # a field named like one of the export's own columns
+            name = f"msg.{name}"
         chunk[name] = value
     return chunk
 
 
-def _flatten(value: Any, prefix: str, skip: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
-    """(column name, one-row column) of every leaf of a message (a rosbags dataclass)."""
-    if is_dataclass(value):
-        for field in fields(value):
-            if field.name.startswith("__") or field.name == skip:
-                continue
-            yield from _flatten(getattr(value, field.name), f"{prefix}{field.name}" if not prefix else
-                                f"{prefix}.{field.name}")
-        return
-    if isinstance(value, np.ndarray):
-        if value.dtype in (np.uint8, np.int8):  # bytes: image data, compressed or not
-            yield f"{prefix}.bytes", np.array([value.size], dtype=np.int64)
-        else:
-            yield prefix, _one_list(value)
-        return
-    if isinstance(value, (list, tuple)):
-        yield prefix, np.array([json.dumps([_plain(v) for v in value])], dtype=object)
-        return
-    if isinstance(value, str):
-        yield prefix, np.array([value], dtype=object)
-        return
-    yield prefix, np.array([value])
+def _flatten(msg: Any, msgtype: str, prefix: str, definitions: Definitions,
+             skip: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
+    """(column name, one-row column) of every leaf of ``msg`` (a rosbags message of ``msgtype``)."""
+    for name, (kind, detail) in definitions(msgtype)[1]:
+        if name == skip:
+            continue
+        column, value = f"{prefix}{name}", getattr(msg, name)
+        if kind == Nodetype.NAME:
+            yield from _flatten(value, detail, f"{column}.", definitions)
+        elif kind == Nodetype.BASE:
+            dtype = PRIMITIVE_DTYPES.get(detail[0])
+            yield column, np.array([value], dtype=object if dtype is None else dtype)
+        else:  # an array (fixed size) or a sequence
+            (inner_kind, inner), is_sequence = detail[0], kind == Nodetype.SEQUENCE
+            dtype = PRIMITIVE_DTYPES.get(inner[0]) if inner_kind == Nodetype.BASE else None
+            if dtype is None:  # strings or messages
+                yield column, np.array([json.dumps([_plain(v) for v in value])], dtype=object)
+            elif is_sequence and inner[0] in BYTE_TYPES:  # binary data: image bytes, compressed or not
+                yield f"{column}.bytes", np.array([len(value)], dtype=np.int64)
+            elif is_sequence:
+                yield column, _one_list(np.asarray(value, dtype=dtype))
+            else:
+                yield column, np.asarray(value, dtype=dtype).reshape(1, -1)
 
 
 def _plain(value: Any) -> Any:

@@ -190,7 +190,8 @@ class CarmenSource:
         with opener(path, "rb") as f:
             self._lines = f.read().splitlines()
         self.warnings: list[str] = []
-        self._types = _typestore()
+        self.typestore = _typestore()
+        self._types = self.typestore.types
         self.params: dict[str, float] = {}  # PARAM lines, as they come (a parameter logged later is not yet known)
         lines: list[tuple[int, str, int]] = []  # (line index, kind, stamp) of the laser and odometry lines
         bad: Counter[str] = Counter()
@@ -368,11 +369,11 @@ class CarmenSource:
         return self._types[TF_MSGTYPE](transforms=transforms)
 
 
-def _typestore() -> dict[str, Any]:
-    """The ROS 1 message classes (with header.seq), tf2_msgs/TFMessage added."""
+def _typestore() -> Any:
+    """The ROS 1 message types (with header.seq), tf2_msgs/TFMessage added."""
     store = get_typestore(Stores.ROS1_NOETIC)
     store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MSGTYPE))
-    return store.types
+    return store
 
 
 def write_flaser_log(bag_path: str | Path, out_path: str | Path, scan_topic: str = "/scan",

@@ -129,6 +129,10 @@ class _AnySource:
     def deserializer(self) -> Callable[[RawRecord], Any]:
         return lambda rec: self.reader.deserialize(rec.raw, rec.msgtype)
 
+    @property
+    def typestore(self) -> Any:
+        return self.reader.typestore
+
     def close(self) -> None:
         self.reader.close()
 
@@ -154,6 +158,10 @@ class _MergedSource:
     def deserializer(self) -> Callable[[RawRecord], Any]:
         # All parts come from one recording, so their type definitions agree.
         return self.parts[0].deserializer()
+
+    @property
+    def typestore(self) -> Any:
+        return self.parts[0].typestore
 
     def close(self) -> None:
         for part in self.parts:
@@ -465,6 +473,12 @@ class BagReader:
     def storage_sources(self) -> list[Any]:
         """The readers of the storage files (for :func:`bagtools.io.storage.storage_details`)."""
         return list(self._source.parts) if isinstance(self._source, _MergedSource) else [self._source]
+
+    def field_definitions(self, msgtype: str) -> tuple[list, list]:
+        """rosbags' definition of ``msgtype`` as the bag declares it: (constants, fields), each field
+        ``(name, (Nodetype, detail))``; what a field's ROS type is (uint64, float32[3], ...), which the message
+        object's Python values do not say."""
+        return self._source.typestore.fielddefs[msgtype]
 
     def require_topic(self, name: str, msgtypes: Iterable[str] | None = None) -> TopicInfo:
         """Return the topic's info, or raise :class:`TopicError` naming what exists."""
