@@ -7,10 +7,11 @@ The layers, bottom up (nothing imports upward):
 - ``tf``: a time-indexed tf buffer with tf2's semantics (``TfBuffer``), repairs and ``tf echo``;
 - ``dataset``: the streams the algorithms read (scans in recording order, odometry);
 - ``trajectory``: trajectories, TUM files, evo's APE/RPE and the benchmarks' relations metric;
-- ``ndt``: 2D NDT and correlative (branch and bound) scan matching;
-- ``grid``: log-odds occupancy grids and ray casting;
+- ``scan_matching``: 2D NDT and correlative (branch and bound) scan matching;
+- ``grid``: log-odds occupancy grids, ray casting and the free space rays saw;
+- ``odometry``: the laser-odometry front end that ``slam``, ``ndt-odom`` and ``localize`` share;
 - ``gridmap``, ``cloudmap``: maps from known poses (``grid``, ``map-cloud``);
-- ``ndtodom``: laser odometry (``ndt-odom``), the front end of SLAM;
+- ``ndtodom``: the ``ndt-odom`` command's pipeline (a bag through the front end, its outputs);
 - ``localize``: where scans are in a map the robot already has (so far the global search, ``GlobalLocalizer``);
 - ``slam``: loop closure, the GTSAM pose graph, the SLAM pipeline and ``eval``;
 - ``results``: results.mcap writers (to open beside the bag in Foxglove);

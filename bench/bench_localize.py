@@ -301,7 +301,7 @@ def _global_rows(quick: bool) -> list[Row]:
     from bagtools.io import open_bag
     from bagtools.localize import GlobalLocalizer
     from bagtools.localize.global_search import REACH_M
-    from bagtools.ndt import match_scans_grid, voxel_subsample
+    from bagtools.scan_matching import match_scans_grid, voxel_subsample
     from bagtools.ndtodom import run_front_end
     from bagtools.simtruth import read_ground_truth
     from bagtools.transforms import tform2pose

@@ -43,7 +43,7 @@ from collections.abc import Callable
 import numpy as np
 import open3d as o3d
 
-from bagtools.ndt import (
+from bagtools.scan_matching import (
     CorrelativeReference, correlative, match_scans, match_scans_grid, match_scans_grid_peaks, ranges_to_points,
 )
 from bench.common import Row

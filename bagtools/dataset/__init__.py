@@ -7,7 +7,9 @@ from bagtools.dataset.poses import (
     TrajectoryScanPoses,
 )
 from bagtools.dataset.scans import (
+    LOGGING_ORDER_STEP_NS,
     PosedScan,
+    ScanClock,
     ScanMessage,
     ScanStream,
     SensorPoints,
@@ -15,10 +17,12 @@ from bagtools.dataset.scans import (
     posed_scan_chunks,
     recording_order,
     require_topic,
+    scan_clock,
     stamped_late,
 )
 
 __all__ = [
-    "NO_SCAN_TRANSFORM_WARNING", "PosedScan", "ScanMessage", "ScanPoseSource", "ScanStream", "SensorPoints",
-    "SensorStream", "TfScanPoses", "TrajectoryScanPoses", "posed_scan_chunks", "recording_order", "require_topic", "stamped_late",
+    "LOGGING_ORDER_STEP_NS", "NO_SCAN_TRANSFORM_WARNING", "PosedScan", "ScanClock", "ScanMessage", "ScanPoseSource", "ScanStream", "SensorPoints",
+    "SensorStream", "TfScanPoses", "TrajectoryScanPoses", "posed_scan_chunks", "recording_order", "require_topic", "scan_clock",
+    "stamped_late",
 ]

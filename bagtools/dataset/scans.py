@@ -3,8 +3,12 @@
 Every command that consumes sensor data (map-cloud, grid, ndt-odom, slam) reads
 it here, in bag order, the way KISS-ICP's datasets feed its pipeline:
 
+- :func:`scan_clock` tells whether a topic's header stamps can time its scans
+  (:class:`ScanClock`): a log whose stamps are all zero, all equal or mostly
+  going backwards says nothing of when its scans were taken; they are then
+  taken in logging order, one second apart.
 - :class:`ScanStream` yields the LaserScans of one topic as
-  :class:`~bagtools.io.LaserScanArrays`. A scan whose header places no beam
+  :class:`~bagtools.io.LaserScanArrays`, timed by its clock. A scan whose header places no beam
   (non-finite or zero angle_increment) is skipped; with ``increasing`` a scan
   whose stamp is not after the previous one is skipped; with ``min_returns`` a
   scan with fewer valid returns is skipped. Every skip is counted by reason and
@@ -22,7 +26,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -85,6 +89,58 @@ def stamped_late(stamps_ns: np.ndarray, order: np.ndarray) -> np.ndarray:
     return late
 
 
+#: A topic's stamps cannot time its scans when more than this share of its steps (bag order) do not move forward
+#: (all zero, all equal, or mostly going backwards; a few late ones are skipped as before).
+UNUSABLE_STAMPS_SHARE = 0.5
+#: Scans whose stamps cannot be used are stamped the first stamp plus this per scan, in logging order (ns).
+LOGGING_ORDER_STEP_NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class ScanClock:
+    """How a topic's scans are timed: by their header stamps (``usable``), or, when those say nothing, by their
+    logging order: the ``index``-th message of the topic (bag order, counting every message) is stamped
+    ``first_ns + index * LOGGING_ORDER_STEP_NS``. ``why``: what is wrong with the stamps."""
+
+    usable: bool = True
+    first_ns: int = 0
+    why: str = ""
+
+    def stamp_ns(self, index: int, header_ns: int) -> int:
+        return header_ns if self.usable else self.first_ns + index * LOGGING_ORDER_STEP_NS
+
+    def warning(self, topic: str) -> str | None:
+        """The one line that says the stamps were ignored (None when they were used)."""
+        if self.usable:
+            return None
+        return (f"the stamps of {topic} cannot time its scans ({self.why}): they were ignored, the scans taken in "
+                f"logging order, {LOGGING_ORDER_STEP_NS / 1e9:g} s apart from the first stamp (the output's stamps "
+                "are these)")
+
+
+def scan_clock(bag: BagReader, topic: str) -> ScanClock:
+    """The clock of ``topic``'s scans (see :class:`ScanClock`), from their header stamps in bag order."""
+    stamps = np.array([rec.msg.stamp_ns if isinstance(rec.msg, LaserScanArrays) else _header_ns(rec.msg)
+                       for rec in bag.messages([topic], from_cdr={topic: laserscan_from_cdr})], dtype=np.int64)
+    if stamps.size < 3:
+        return ScanClock()
+    steps = np.diff(stamps)
+    stuck = int(np.count_nonzero(steps <= 0))
+    if stuck <= UNUSABLE_STAMPS_SHARE * steps.size:
+        return ScanClock()
+    if np.all(stamps == stamps[0]):
+        why = f"every stamp is {stamps[0] / 1e9:.9f} s"
+    else:
+        why = f"{stuck} of {steps.size} stamps are not after the one before"
+    return ScanClock(False, int(stamps[0]), why)
+
+
+def _header_ns(msg: object) -> int:
+    stamp = msg.header.stamp
+    return int(getattr(stamp, "sec", getattr(stamp, "secs", 0))) * 1_000_000_000 + int(
+        getattr(stamp, "nanosec", getattr(stamp, "nsecs", 0)))
+
+
 def require_topic(bag: BagReader, topic: str, msgtypes: tuple[str, ...], what: str) -> None:
     """Raise :class:`TopicError` naming the topics of the wanted types when ``topic`` is missing or of another type."""
     if topic not in bag.topics:
@@ -109,16 +165,18 @@ class ScanStream:
     Args:
         bag: an open bag.
         topic: a sensor_msgs/LaserScan topic (TopicError otherwise).
-        increasing: skip scans whose header stamp is not after the previous usable one.
+        clock: how the scans are timed (:func:`scan_clock`; default: by their header stamps).
+        increasing: skip scans whose stamp is not after the previous usable one.
         min_returns: skip scans with fewer valid returns than this.
         desc: progress-bar label (None: no bar).
     """
 
-    def __init__(self, bag: BagReader, topic: str, *, increasing: bool = False, min_returns: int = 0,
-                 desc: str | None = "scans") -> None:
+    def __init__(self, bag: BagReader, topic: str, *, clock: ScanClock | None = None, increasing: bool = False,
+                 min_returns: int = 0, desc: str | None = "scans") -> None:
         require_topic(bag, topic, LASERSCAN_TYPES, "LaserScan")
         self.bag = bag
         self.topic = topic
+        self.clock = clock or ScanClock()
         self.increasing = increasing
         self.min_returns = min_returns
         self.desc = desc
@@ -147,12 +205,15 @@ class ScanStream:
 
     def decode(self, rec: Record) -> ScanMessage | None:
         """One record of the topic as a usable scan, or None when it is skipped (and counted)."""
+        index = self.read
         self.read += 1
         try:
             scan = rec.msg if isinstance(rec.msg, LaserScanArrays) else decode_laserscan(rec.msg)
         except DecodeError as err:
             self.skipped[f"unusable header: {err.problem}"] += 1
             return None
+        if not self.clock.usable:
+            scan = replace(scan, stamp_ns=self.clock.stamp_ns(index, scan.stamp_ns))
         if scan.notes:
             self.notes.update(scan.notes)
         if self.increasing and self._last_ns is not None and scan.stamp_ns <= self._last_ns:
@@ -170,7 +231,7 @@ class ScanStream:
 
     def warnings(self) -> list[str]:
         """One line per kind of skipped scan and per kind of implausible header value, with counts."""
-        out = []
+        out = [] if self.clock.usable else [self.clock.warning(self.topic)]
         for reason, n in self.skipped.items():
             if reason == SKIP_BACKWARDS:
                 out.append(f"{n} scan(s) on {self.topic} skipped: header stamp not after the previous scan's "

@@ -36,7 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.dataset import PosedScan, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks
+from bagtools.dataset import (
+    PosedScan, ScanClock, ScanPoseSource, ScanStream, TfScanPoses, TrajectoryScanPoses, posed_scan_chunks, scan_clock,
+)
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
 from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
@@ -86,10 +88,12 @@ class GridMapPipeline:
     """
 
     def __init__(self, bag_path: str | Path, options: GridMapOptions, trajectory: Trajectory | None = None,
-                 keep_scans: bool = False) -> None:
+                 keep_scans: bool = False, clock: ScanClock | None = None) -> None:
+        """``clock``: how the scans are timed (default: :func:`~bagtools.dataset.scan_clock` of the topic)."""
         self.bag_path = Path(bag_path)
         self.options = options
         self.trajectory = trajectory
+        self.clock = clock
         self.keep_scans = keep_scans
         self._kept: list[LaserScanArrays] = []
         self._kept_T: list[np.ndarray] = []
@@ -177,7 +181,12 @@ class GridMapPipeline:
 
     def _map_scans(self, bag: BagReader) -> OccupancyGrid:
         # As ndt-odom and slam read them: a scan stamped at or before the one before it is placed by a wrong time.
-        self.scan_stream = ScanStream(bag, self.options.topic, increasing=True, desc="grid")
+        clock = self.clock or scan_clock(bag, self.options.topic)
+        if not clock.usable and self.trajectory is None and self.options.poses_kind != "tum":
+            raise BagtoolsError(f"the stamps of {self.options.topic} cannot time its scans ({clock.why}), so "
+                                f"--poses {self.options.poses} cannot place them: map them with --poses TRAJ.tum from "
+                                "`bagtools slam` or `ndt-odom`, which take them in logging order", bag.path)
+        self.scan_stream = ScanStream(bag, self.options.topic, clock=clock, increasing=True, desc="grid")
         for chunk in posed_scan_chunks(self.scan_stream, self.poses):
             usable = [(item, ranges) for item in chunk if (ranges := self._usable_ranges(item)) is not None]
             if usable:

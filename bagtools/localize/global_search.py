@@ -1,10 +1,10 @@
 """The global search: a scan matched against a whole map at every heading, with no initial pose.
 
 The map's occupied cells are the reference of the correlative branch and bound
-(:func:`~bagtools.ndt.match_scans_grid_peaks`), searched over the map's whole
+(:func:`~bagtools.scan_matching.match_scans_grid_peaks`), searched over the map's whole
 extent and a full turn on a ``coarse_m`` raster (10 cm; coarser where the
 branch and bound's pyramids, the map padded by the window, would exceed
-:data:`~bagtools.ndt.correlative.MAX_RASTER_CELLS`: 12 cm for 100 m x 100 m,
+:data:`~bagtools.scan_matching.correlative.MAX_RASTER_CELLS`: 12 cm for 100 m x 100 m,
 while at the map's own 5 cm a 50 m map already does), with one scan point per
 coarse cell. Its distinct peaks,
 ``min_ratio`` of the best or more and ``separation`` apart, are each refined on
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.grid import Nav2Map
-from bagtools.ndt import CorrelativeReference, match_scans_grid, match_scans_grid_peaks, voxel_subsample
-from bagtools.ndt.correlative import MAX_DEPTH, MAX_RASTER_CELLS
+from bagtools.scan_matching import CorrelativeReference, match_scans_grid, match_scans_grid_peaks, voxel_subsample
+from bagtools.scan_matching.correlative import MAX_DEPTH, MAX_RASTER_CELLS
 
 #: Hypotheses closer than this (m, rad) are one place.
 SEPARATION = (1.0, 0.3)

@@ -55,7 +55,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from bagtools.ndtodom.steps import ScanStep
+from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.slam.backend import UNLINKED_COVARIANCE
 from bagtools.slam.constraints import LoopClosureSearch, LoopOptions

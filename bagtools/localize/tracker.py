@@ -72,9 +72,9 @@ from typing import NamedTuple
 import numpy as np
 
 from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
-from bagtools.ndt import GridMatchResult, NdtReference, match_scans, match_scans_grid
-from bagtools.ndt.correlative import RASTER_MAX
-from bagtools.ndtodom.frontend import (
+from bagtools.scan_matching import GridMatchResult, NdtReference, match_scans, match_scans_grid
+from bagtools.scan_matching.correlative import RASTER_MAX
+from bagtools.odometry.frontend import (
     CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
     PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S,
 )

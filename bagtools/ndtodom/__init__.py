@@ -1,15 +1,12 @@
 """Laser odometry by 2D NDT scan matching (``bagtools ndt-odom``)."""
 
-from bagtools.ndtodom.frontend import FrontEndOptions, LaserOdometry, normalized_score
 from bagtools.ndtodom.pipeline import (
     INIT_MODES, REFERENCE_MODES, NdtOdomOptions, NdtOdomPipeline, NdtOdomResult, run_front_end,
 )
-from bagtools.ndtodom.steps import FrontEndRun, ScanStep
 from bagtools.ndtodom.plots import render_scan_map_png, render_trajectories_png, scans_in_frame
 from bagtools.ndtodom.writer import NDT_ODOM_FILES, write_ndt_odom
 
 __all__ = [
-    "INIT_MODES", "NDT_ODOM_FILES", "REFERENCE_MODES", "FrontEndOptions", "FrontEndRun", "LaserOdometry",
-    "NdtOdomOptions", "NdtOdomPipeline", "NdtOdomResult", "ScanStep",
-    "normalized_score", "render_scan_map_png", "run_front_end", "render_trajectories_png", "scans_in_frame", "write_ndt_odom",
+    "INIT_MODES", "NDT_ODOM_FILES", "REFERENCE_MODES",
+    "NdtOdomOptions", "NdtOdomPipeline", "NdtOdomResult", "render_scan_map_png", "run_front_end", "render_trajectories_png", "scans_in_frame", "write_ndt_odom",
 ]

@@ -4,7 +4,7 @@
         _load_odometry()   tf and /odom: the odometry frame, the robot base frame (repaired samples)
         _read_scans()      every usable scan's valid points (the shared dataset reader counts the rest)
         _scan_offset()     T_base_scan: --scan-frame-offset, else tf, else identity with a warning
-        _register()        the scans in order through LaserOdometry (bagtools.ndtodom.frontend): guesses,
+        _register()        the scans in order through LaserOdometry (bagtools.odometry.frontend): guesses,
                            gating, grid search when a guess cannot be trusted, NDT refinement, checks
         _evaluate()        /ground_truth of the bag (simulated, or a reference trajectory), APE and RPE
 
@@ -25,15 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.dataset import ScanStream, recording_order, require_topic, stamped_late
+from bagtools.dataset import ScanClock, ScanStream, recording_order, require_topic, scan_clock, stamped_late
 from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry, open_bag,
 )
-from bagtools.ndt import MIN_SCAN_POINTS
-from bagtools.ndt.grid import CELL_MODELS
-from bagtools.ndtodom.frontend import GUESSES, VOXEL_PER_CELL, FrontEndOptions, LaserOdometry, cell_size_for
-from bagtools.ndtodom.steps import FrontEndRun
+from bagtools.odometry.frontend import GUESSES, VOXEL_PER_CELL, FrontEndOptions, LaserOdometry, cell_size_for
+from bagtools.odometry.steps import FrontEndRun
+from bagtools.scan_matching import MIN_SCAN_POINTS
+from bagtools.scan_matching.grid import CELL_MODELS
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
@@ -59,14 +59,14 @@ class NdtOdomOptions:
     has it, else constant velocity). ``search``: allow the grid search when a
     guess cannot be trusted. ``use_odometry``: False ignores the bag's wheel
     odometry. ``cell_size_m``: NDT cell side (m), None for one suited to the
-    scans (:func:`~bagtools.ndtodom.frontend.cell_size_for`). ``cell_model``: 'widened'
-    (see :mod:`bagtools.ndt.grid`) or 'paper'. ``min_score``: normalized score
+    scans (:func:`~bagtools.odometry.frontend.cell_size_for`). ``cell_model``: 'widened'
+    (see :mod:`bagtools.scan_matching.grid`) or 'paper'. ``min_score``: normalized score
     in [0, 1] below which a match falls back to its guess.
     ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
     overriding (or standing in for) tf. ``max_speed_mps`` and
     ``max_turn_rate_radps``: what the robot can do (bounds constant velocity
     and the search). ``wheeled``: False for a handheld or flying laser (its
-    steps need not run along arcs, see :class:`~bagtools.ndtodom.frontend.FrontEndOptions`).
+    steps need not run along arcs, see :class:`~bagtools.odometry.frontend.FrontEndOptions`).
     """
 
     topic: str = "/scan"
@@ -110,7 +110,7 @@ class NdtOdomOptions:
             raise BagtoolsError(f"max_iterations must be at least 1, got {self.max_iterations}")
 
     def front_end(self, cell_size_m: float) -> FrontEndOptions:
-        """The settings of the :class:`~bagtools.ndtodom.frontend.LaserOdometry` these options ask for
+        """The settings of the :class:`~bagtools.odometry.frontend.LaserOdometry` these options ask for
         (``cell_size_m`` when the options leave it to the scans)."""
         cell = self.cell_size_m if self.cell_size_m is not None else cell_size_m
         return FrontEndOptions(init=self.init, search=self.search, reference=self.reference,
@@ -144,6 +144,7 @@ class NdtOdomResult:
     problem: str | None = None
     scans: list[LaserScanArrays] = field(default_factory=list)
     T_base_scan: np.ndarray = field(default_factory=lambda: np.eye(4))
+    clock: ScanClock = field(default_factory=ScanClock)
 
     @property
     def scan_points(self) -> list[np.ndarray]:
@@ -164,7 +165,8 @@ class ScanInputs:
     ``points`` their valid returns (M_k, 2) in the scan frame (m); ``order`` the
     order to register them in (their recording order, :meth:`NdtOdomPipeline._order`);
     ``odometry`` (T_odom_base (N, 4, 4), valid (N,)) at the stamps, None without
-    odometry; ``T_base_scan`` (4, 4) the laser's mount on the robot base.
+    odometry; ``T_base_scan`` (4, 4) the laser's mount on the robot base; ``clock``
+    how the scans are timed (their stamps, or their logging order when those say nothing).
     """
 
     stamps_ns: np.ndarray
@@ -172,6 +174,7 @@ class ScanInputs:
     order: np.ndarray
     odometry: tuple[np.ndarray, np.ndarray] | None
     T_base_scan: np.ndarray
+    clock: ScanClock = field(default_factory=ScanClock)
 
     def points_base(self, k: int) -> np.ndarray:
         """Scan ``k``'s points (M, 2) in the robot base frame (m)."""
@@ -200,6 +203,7 @@ class NdtOdomPipeline:
         self.seqs: list[int | None] = []
         self.reordered = 0
         self.repeated = 0
+        self.stamps_ignored: str | None = None  # why the scans' stamps were ignored (logging order instead)
 
     def read_inputs(self, bag: BagReader) -> ScanInputs:
         """What the front end is fed, read from the open ``bag``, nothing matched: the usable scans, the
@@ -207,14 +211,21 @@ class NdtOdomPipeline:
         The pipeline's frames, counts and warnings are set on the way."""
         self._require_scan_topic(bag)
         self._load_odometry(bag)
-        stamps, points = self._read_scans(bag)
+        clock = scan_clock(bag, self.options.topic)
+        self.stamps_ignored = None if clock.usable else clock.why
+        stamps, points = self._read_scans(bag, clock)
         self.warnings[:0] = list(bag.warnings)
         self._scan_offset(stamps)
         if len(stamps) == 0:
-            return ScanInputs(stamps, points, np.zeros(0, dtype=np.intp), None, self.T_base_scan)
+            return ScanInputs(stamps, points, np.zeros(0, dtype=np.intp), None, self.T_base_scan, clock)
         order = self._order(stamps)
-        odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
-        return ScanInputs(stamps, points, order, odometry, self.T_base_scan)
+        odometry = None
+        if clock.usable:
+            odometry = self._odometry_at(stamps, out_of_order=stamped_late(stamps, order))
+        elif self._has_odometry():
+            self.warnings.append("the odometry is not used: without the scans' stamps nothing ties it to them")
+            self.odometry_source = None
+        return ScanInputs(stamps, points, order, odometry, self.T_base_scan, clock)
 
     def register(self, inputs: ScanInputs) -> tuple[LaserOdometry, np.ndarray]:
         """The laser odometry of :meth:`read_inputs`' scans: the front end, and the base's poses (N, 3)
@@ -257,7 +268,7 @@ class NdtOdomPipeline:
             summary["warnings"] = self.warnings
         front.run.warnings = list(self.warnings)
         return NdtOdomResult(trajectory, odom_traj, truth, front.run, summary, scans=self.scans,
-                             T_base_scan=self.T_base_scan)
+                             T_base_scan=self.T_base_scan, clock=inputs.clock)
 
     # -- steps -------------------------------------------------------------------
 
@@ -311,12 +322,13 @@ class NdtOdomPipeline:
         except BagtoolsError as err:
             raise BagtoolsError(f"the bag's tf data cannot be used: {err.problem}", bag.path) from err
 
-    def _read_scans(self, bag: BagReader) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Stamps (N,) int64 and valid points (M_k,2) of the usable scans, in bag order."""
+    def _read_scans(self, bag: BagReader, clock: ScanClock) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Stamps (N,) int64 (by ``clock``) and valid points (M_k,2) of the usable scans, in bag order."""
         stamps: list[int] = []
         points: list[np.ndarray] = []
         seqs: list[int | None] = []
-        stream = ScanStream(bag, self.options.topic, increasing=True, min_returns=MIN_SCAN_POINTS, desc="reading scans")
+        stream = ScanStream(bag, self.options.topic, clock=clock, increasing=True, min_returns=MIN_SCAN_POINTS,
+                            desc="reading scans")
         far = Counter()
         for item in stream:
             xy = item.scan.points_xy()
@@ -528,6 +540,7 @@ class NdtOdomPipeline:
             "scans_used": len(steps),
             "scans_skipped": dict(self.skipped),
             "scans_out_of_recording_order": self.reordered,
+            "stamps_ignored": self.stamps_ignored,
             "scans_repeated": self.repeated,
             "options": asdict(self.options),
             "warnings": self.warnings,
@@ -557,7 +570,7 @@ def _tf_arrays(parent: str, child: str, stamps_ns: np.ndarray, T: np.ndarray) ->
 def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None, keep_scans: bool = False) -> NdtOdomResult:
     """The laser-odometry front end of a bag, as ``ndt-odom`` computes it: for ``slam`` and scripts.
 
-    ``result.front_end`` is the :class:`~bagtools.ndtodom.steps.FrontEndRun`
+    ``result.front_end`` is the :class:`~bagtools.odometry.steps.FrontEndRun`
     (every scan: base pose in the odometry frame, points in the base frame,
     keyframes with their matches and covariances); ``result.odometry`` and
     ``result.ground_truth`` the bag's wheel odometry and reference at the scan

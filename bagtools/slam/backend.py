@@ -53,7 +53,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from bagtools.ndtodom.steps import ScanStep
+from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.slam.constraints import (
     ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch,

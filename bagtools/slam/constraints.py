@@ -18,11 +18,11 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
 2. **Match** (:meth:`LoopClosureSearch.match`). The *old map* is keyframe
    ``a`` and its ``old_map_keyframes`` neighbours on each side moved into
    ``a``'s frame (built once per ``a`` and cached: a
-   :class:`~bagtools.ndt.CorrelativeReference` and an
-   :class:`~bagtools.ndt.NdtReference`); the *new map* is ``b`` and its
+   :class:`~bagtools.scan_matching.CorrelativeReference` and an
+   :class:`~bagtools.scan_matching.NdtReference`); the *new map* is ``b`` and its
    ``new_map_keyframes`` predecessors moved into ``b``'s frame (several scans:
    a 180-degree laser's one scan sees too little to tell a corridor's places
-   apart). :func:`~bagtools.ndt.match_scans_grid` searches a window around the
+   apart). :func:`~bagtools.scan_matching.match_scans_grid` searches a window around the
    estimated relative pose, +- ``gate_sigmas`` sigmas (at least
    ``min_window_m``/``min_window_rad``, at most the search radius and a full
    turn), in steps of ``resolution_m`` and of the angle that moves a point
@@ -31,7 +31,7 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    ``max_refine_m``/``max_refine_rad`` of it. Wide windows (``wide_window_m``
    and more: the estimate is unsure) cost tens of milliseconds: at most one is
    searched per ``wide_spacing_m`` of path. Last, the two maps must not
-   contradict each other's free space (:mod:`bagtools.slam.freespace`): the
+   contradict each other's free space (:mod:`bagtools.grid.freespace`): the
    score counts points on walls, not walls standing where the other map's
    laser saw through. A look-alike (a room of the same shape furnished
    otherwise, a corridor a few metres along) can score as well as the place,
@@ -103,11 +103,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bagtools.ndt import (
+from bagtools.scan_matching import (
     MIN_SCAN_POINTS, CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid,
     match_scans_grid_peaks, voxel_subsample,
 )
-from bagtools.slam.freespace import FreeSpace
+from bagtools.grid.freespace import FreeSpace
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 # Candidate outcomes (summary.json counts them).
@@ -499,7 +499,7 @@ class LoopClosureSearch:
     def _seen_through(self, old_map: _OldMap, new_scans: list[tuple[np.ndarray, np.ndarray]],
                       T_old_new: np.ndarray) -> float:
         """How much the two maps, matched at ``T_old_new``, contradict each other's free space: the smaller of the
-        shares of each map's points that fall where the other's rays passed (see :mod:`bagtools.slam.freespace`).
+        shares of each map's points that fall where the other's rays passed (see :mod:`bagtools.grid.freespace`).
         The smaller, because a world that changed between the visits (a door shut, a person passing) puts walls
         in one map's free space, while a look-alike puts them in both. ``new_scans``: the new map's, placed by
         :meth:`_placed`."""

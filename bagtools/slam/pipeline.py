@@ -41,14 +41,14 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.dataset import require_topic
+from bagtools.dataset import ScanClock, require_topic
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid
 from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.gridmap.options import MAX_RESOLUTION, MIN_RESOLUTION
 from bagtools.io import LASERSCAN_TYPES, open_bag
 from bagtools.ndtodom import NdtOdomOptions, NdtOdomResult, run_front_end
-from bagtools.ndtodom.steps import FrontEndRun
+from bagtools.odometry.steps import FrontEndRun
 from bagtools.slam.backend import BackEndOptions, BackEndResult, build_pose_graph
 from bagtools.slam.constraints import ACCEPTED, LoopOptions
 from bagtools.slam.evaluate import trajectory_errors
@@ -129,7 +129,7 @@ class SlamOptions:
 
 
 #: The front end: (bag path, options) -> its result, whose ``front_end`` holds every scan registered
-#: (a :class:`~bagtools.ndtodom.steps.FrontEndRun`). The default is the laser odometry of bagtools.ndtodom.
+#: (a :class:`~bagtools.odometry.steps.FrontEndRun`). The default is the laser odometry of bagtools.ndtodom.
 FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 
 
@@ -186,7 +186,7 @@ class SlamPipeline:
         back = self._timed("back_end", lambda: self._back_end(front))
         trajectory, odometry = self._trajectories(front, back)
         base_frame = result.summary.get("base_frame") or None
-        grid, map_summary = self._timed("map", lambda: self._map(trajectory, base_frame))
+        grid, map_summary = self._timed("map", lambda: self._map(trajectory, base_frame, result.clock))
         ground_truth = result.ground_truth
         evaluation = self._timed("evaluation", lambda: self._evaluate(ground_truth, relations, trajectory, odometry))
         self.timing_s["total"] = time.perf_counter() - t0
@@ -243,13 +243,14 @@ class SlamPipeline:
         return (Trajectory(stamps, pose2tform(poses[by_stamp]).reshape(-1, 4, 4)),
                 Trajectory(stamps, pose2tform(front.poses()[by_stamp]).reshape(-1, 4, 4)))
 
-    def _map(self, trajectory: Trajectory, base_frame: str | None) -> tuple[OccupancyGrid, dict]:
-        """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of)."""
+    def _map(self, trajectory: Trajectory, base_frame: str | None, clock: ScanClock) -> tuple[OccupancyGrid, dict]:
+        """The grid of every scan at its optimized pose (``base_frame``: the robot frame the poses are of; ``clock``:
+        how the front end timed the scans)."""
         o = self.options
         options = GridMapOptions(topic=o.topic, frame=SLAM_FRAME, poses="slam trajectory", resolution=1.0 / o.resolution_m,
                                  max_range_m=o.max_range_m or MAP_MAX_RANGE_M, base_frame=base_frame,
                                  scan_frame_offset=o.scan_frame_offset)
-        result = GridMapPipeline(self.bag_path, options, trajectory=trajectory).run()
+        result = GridMapPipeline(self.bag_path, options, trajectory=trajectory, clock=clock).run()
         # what the front end said already (perhaps with a hint after it) is not said again
         self.warnings.extend(w for w in result.summary.get("warnings", [])
                              if not any(said.startswith(w) for said in self.warnings))

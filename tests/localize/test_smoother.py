@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
-from bagtools.ndtodom.steps import ScanStep
+from bagtools.odometry.steps import ScanStep
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world import World
 

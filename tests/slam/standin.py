@@ -20,7 +20,7 @@ import numpy as np
 from bagtools.dataset import ScanStream
 from bagtools.io import open_bag, read_tf_arrays
 from bagtools.ndtodom import NdtOdomResult
-from bagtools.ndtodom.steps import FrontEndRun, ScanStep
+from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer
 from bagtools.trajectory import Trajectory

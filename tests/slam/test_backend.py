@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from bagtools.ndtodom.steps import FrontEndRun
+from bagtools.odometry.steps import FrontEndRun
 from bagtools.slam import BackEndOptions, build_pose_graph
 from bagtools.slam.backend import UNLINKED_COVARIANCE
 from bagtools.slam.graph import ODOMETRY

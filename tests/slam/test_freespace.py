@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bagtools.slam.freespace import FREE_MARGIN_M, FreeSpace
+from bagtools.grid.freespace import FREE_MARGIN_M, FreeSpace
 
 
 def _room_scan(origin: np.ndarray, n: int = 360) -> np.ndarray:

@@ -15,7 +15,7 @@ import pytest
 
 from bagtools.errors import BagtoolsError, TopicError
 from bagtools.grid import read_nav2_map
-from bagtools.ndtodom.steps import FrontEndRun
+from bagtools.odometry.steps import FrontEndRun
 from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, align_se2, build_pose_graph, write_slam
 from bagtools.slam.constraints import ACCEPTED
 from bagtools.trajectory import read_tum
@@ -212,8 +212,9 @@ def test_real_csail_log_without_odometry_from_later_first_scans(csail_scans_step
     """Started a few scans later, the scans-only front end meets the sharp turns of scans 52-66 at other speeds
     and keyframes (from these starts it took the turn into scan 67 27 degrees wrong, and SLAM ended 1.3-1.5 m off,
     before the fine grid decided such contests): SLAM's map is as right as from the first scan."""
-    from bagtools.ndtodom import LaserOdometry, NdtOdomOptions
-    from bagtools.ndtodom.frontend import cell_size_for
+    from bagtools.ndtodom import NdtOdomOptions
+    from bagtools.odometry import LaserOdometry
+    from bagtools.odometry.frontend import cell_size_for
 
     bag, steps = csail_scans_steps
     front = LaserOdometry(NdtOdomOptions(use_odometry=False).front_end(cell_size_for([s.points_base for s in steps])))

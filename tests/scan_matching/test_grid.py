@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bagtools.ndt import NdtReference
-from bagtools.ndt.grid import MAJOR_AXIS_INFLATION, MIN_EIGENVALUE_RATIO, RESIDUAL_COVARIANCE_FACTOR
+from bagtools.scan_matching import NdtReference
+from bagtools.scan_matching.grid import MAJOR_AXIS_INFLATION, MIN_EIGENVALUE_RATIO, RESIDUAL_COVARIANCE_FACTOR
 
 
 def cell_of(ref: NdtReference, point) -> np.ndarray:

@@ -21,7 +21,7 @@ Accuracy and speed (bench/bench_ndt.py, 300 LDS-01-like pairs with 1 cm noise,
 initial guess off by 5 cm, 5 cm, 0.05 rad; one core, including building the
 reference): 0.5 m cells give 100 % success, a median error of 1.9 mm in about
 1.2 ms; 1 m cells 2.5 mm in about 1.1 ms, with a wider basin of convergence.
-Those figures are for ``cell_model="widened"`` (see :mod:`bagtools.ndt.grid`),
+Those figures are for ``cell_model="widened"`` (see :mod:`bagtools.scan_matching.grid`),
 which widens each cell along its major axis and removes a sideways bias of
 consecutive-scan matches (1.9 mm per 5 cm driven with 1 m cells, now about
 0.6 mm; 0.3 mm with 0.5 m cells). The paper's model (the default): 3.1 mm at
@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bagtools.ndt.grid import NdtReference, finite_points
+from bagtools.scan_matching.grid import NdtReference, finite_points
 
 #: Fewer finite points than this in either scan is reported as a failed match.
 MIN_SCAN_POINTS = 5
@@ -184,7 +184,7 @@ def match_scans(
         score_tolerance: stop once an accepted step raises the score by less.
         cell_model: "paper" (Biber and Strasser's cell covariances, as MATLAB)
             or "widened" (less biased and more accurate on LDS-like scans; see
-            :mod:`bagtools.ndt.grid`). Ignored when ``reference`` is prebuilt.
+            :mod:`bagtools.scan_matching.grid`). Ignored when ``reference`` is prebuilt.
         prior: optional (mean (3,), information (3,3)) of a Gaussian prior on
             the pose (e.g. from wheel odometry): the iteration then maximizes
             score - 0.5 d^T information d, d = pose - mean (theta wrapped), a

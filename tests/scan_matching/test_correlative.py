@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bagtools.ndt import (
+from bagtools.scan_matching import (
     CorrelativeReference,
     GridMatchResult,
     match_scans,
@@ -14,7 +14,7 @@ from bagtools.ndt import (
     match_scans_grid_ranges,
     ranges_to_points,
 )
-from bagtools.ndt import correlative
+from bagtools.scan_matching import correlative
 from bench.scan_pairs import ANGLES_RAD, lds01_ranges, relative_pose, scan_pairs, turtlebot3_world
 
 TRANS_TOL_M = 0.02

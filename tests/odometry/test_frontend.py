@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools.ndtodom import FrontEndOptions, LaserOdometry, NdtOdomOptions, run_front_end
-from bagtools.ndtodom.frontend import _constrained
+from bagtools.ndtodom import NdtOdomOptions, run_front_end
+from bagtools.odometry import FrontEndOptions, LaserOdometry
+from bagtools.odometry.frontend import _constrained
 from bagtools.trajectory import rpe_frames
 from bagtools.transforms import se2_between, se2_compose, tform2pose
 from tests.conftest import FIXTURES
@@ -88,7 +89,7 @@ def test_a_suspect_stamp_is_searched_beyond_reach(lap, monkeypatch, enabled: boo
     """Scans 2 s apart (up to 0.5 m and 1 rad), no odometry, one stamped 20 ms after the scan before it (a log
     resampled from another clock): within what the robot can do in 20 ms nothing matches; the search beyond reach
     places the scan right, counts and says it. Without it (enabled=False) the step is wrong."""
-    import bagtools.ndtodom.frontend as frontend
+    import bagtools.odometry.frontend as frontend
 
     if not enabled:
         monkeypatch.setattr(frontend, "SHORT_STEP_RATIO", 0.0)
@@ -172,7 +173,7 @@ def test_csail_without_odometry_does_not_diverge(csail_scans_run) -> None:
 
 
 def test_fast_planar_helpers_equal_the_transforms_module() -> None:
-    from bagtools.ndtodom.frontend import _between, _compose
+    from bagtools.odometry.frontend import _between, _compose
     from bagtools.transforms import se2_between as between
     from bagtools.transforms import se2_compose as compose
 
@@ -187,7 +188,7 @@ def test_fast_planar_helpers_equal_the_transforms_module() -> None:
 
 def test_a_wheeled_robot_does_not_step_sideways() -> None:
     """The kinematic prior's arc term: a step along the arc costs nothing sideways, a sideways jump costs much."""
-    from bagtools.ndtodom.frontend import _Prior
+    from bagtools.odometry.frontend import _Prior
 
     prior = _Prior(np.array([1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0]), origin=np.zeros(3))
     turn = 0.6
@@ -200,7 +201,7 @@ def test_a_wheeled_robot_does_not_step_sideways() -> None:
 
 def test_a_step_beyond_what_the_robot_can_do_costs_steeply() -> None:
     """The kinematic prior's reach: within max speed x time nothing is added; 0.15 m or 0.15 rad beyond, 9 units."""
-    from bagtools.ndtodom.frontend import REACH_SD_M, REACH_SD_RAD, _Prior
+    from bagtools.odometry.frontend import REACH_SD_M, REACH_SD_RAD, _Prior
 
     start = np.array([0.5, 0.2, 0.3])
     prior = _Prior(start, np.array([10.0, 10.0, 10.0]), reach=(start, 2.0, 1.0))
@@ -257,7 +258,7 @@ def test_csail_without_odometry_holds_from_other_first_scans(csail_scans_run, fi
     a mirror image or a half-seen room matches nearly as well on the 1 m NDT cells): no step goes wrong by half a
     metre or 30 degrees, and the turn into scan 67 (taken 27 degrees wrong from these starts before the fine grid
     decided such contests) is within 5 degrees."""
-    from bagtools.ndtodom.frontend import cell_size_for
+    from bagtools.odometry.frontend import cell_size_for
 
     steps = csail_scans_run.front_end.steps
     truth = csail_scans_run.ground_truth
@@ -276,7 +277,7 @@ def test_csail_without_odometry_holds_from_other_first_scans(csail_scans_run, fi
 def test_csail_half_the_scans_without_odometry_warns_of_ambiguous_matches(csail_scans_run) -> None:
     """Every other scan (2 m and up to 130 degrees apart, with a 180-degree laser): many steps could be either of
     two places, and the run says so; at the log's own rate it does not."""
-    from bagtools.ndtodom.frontend import cell_size_for
+    from bagtools.odometry.frontend import cell_size_for
 
     assert not any("almost equally well" in w for w in csail_scans_run.summary["warnings"])
     assert csail_scans_run.summary["ambiguous"] <= 8

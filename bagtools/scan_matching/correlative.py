@@ -43,7 +43,7 @@ million candidates) against a local map of 5 scans takes about 20-25 ms, some
 of 0.5 m), the +-0.3 m window from a zero initial pose recovers every pair of
 the bench within 2 cm and 0.5 degrees.
 
-Pose convention, as :func:`bagtools.ndt.match_scans`: the pose [x, y, theta]
+Pose convention, as :func:`bagtools.scan_matching.match_scans`: the pose [x, y, theta]
 (m, m, rad) is the pose of the current scan's frame in the reference frame,
 ``p_ref = R(theta) p_cur + [x, y]``.
 """
@@ -56,8 +56,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from bagtools.ndt.grid import finite_points
-from bagtools.ndt.matcher import MIN_SCAN_POINTS, ranges_to_points
+from bagtools.scan_matching.grid import finite_points
+from bagtools.scan_matching.matcher import MIN_SCAN_POINTS, ranges_to_points
 
 #: Raster value of likelihood 1 (the raster is uint16).
 RASTER_MAX = 65535
@@ -240,7 +240,7 @@ class GridMatchResult:
 
     @property
     def converged(self) -> bool:
-        """Alias of ``ok``, as :class:`bagtools.ndt.NdtResult` names it."""
+        """Alias of ``ok``, as :class:`bagtools.scan_matching.NdtResult` names it."""
         return self.ok
 
 

@@ -69,7 +69,7 @@ def finite_points(points: np.ndarray, what: str) -> np.ndarray:
 class NdtReference:
     """The four shifted NDT grids of one reference scan; build with :meth:`from_points`.
 
-    Build it once and pass it to :func:`bagtools.ndt.match_scans` for every scan
+    Build it once and pass it to :func:`bagtools.scan_matching.match_scans` for every scan
     matched against the same reference (e.g. scan k is the reference of scan k+1
     and the current scan of the match against scan k-1).
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools.ndt import NdtReference, NdtResult, match_scans, match_scans_ranges, ranges_to_points
-from bagtools.ndt.matcher import _evaluate
+from bagtools.scan_matching import NdtReference, NdtResult, match_scans, match_scans_ranges, ranges_to_points
+from bagtools.scan_matching.matcher import _evaluate
 from bench.scan_pairs import ANGLES_RAD, scan_pairs
 
 TRANS_TOL_M = 0.02

@@ -14,12 +14,12 @@ many scans against one reference or local map. ``match_scans_grid_peaks`` return
 the window's distinct good poses (for scenes that repeat), best first.
 """
 
-from bagtools.ndt.correlative import (
+from bagtools.scan_matching.correlative import (
     CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_peaks, match_scans_grid_ranges,
     voxel_subsample,
 )
-from bagtools.ndt.grid import NdtReference
-from bagtools.ndt.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
+from bagtools.scan_matching.grid import NdtReference
+from bagtools.scan_matching.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
 
 __all__ = [
     "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult", "match_scans",

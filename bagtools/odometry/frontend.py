@@ -15,13 +15,13 @@ scan, in the robot base frame:
    result's basin; results that disagree mean several minima.
 3. **Search** when a guess cannot be trusted: no good score, disagreeing
    results, a long time gap, or no odometry and a motion larger than NDT's
-   basin. :func:`~bagtools.ndt.match_scans_grid` (correlative branch and bound)
+   basin. :func:`~bagtools.scan_matching.match_scans_grid` (correlative branch and bound)
    searches a window around the best result that covers what the robot can
    have done since the previous scan (or, with trusted odometry, what the
    odometry's error can be), and NDT refines its result. When even that
    scores poorly, the window of what the robot can have done is searched:
    with odometry, its best match on the submap; without, every distinct
-   correlative peak (:func:`~bagtools.ndt.match_scans_grid_peaks`) on a larger
+   correlative peak (:func:`~bagtools.scan_matching.match_scans_grid_peaks`) on a larger
    submap, since a scene that repeats (a parallel corridor, the mirror image of
    a junction after a sharp turn) can match a small submap better than the
    place itself; without odometry, a time step longer than ``max_gap_s``
@@ -74,10 +74,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bagtools.ndt import NdtReference, match_scans
-from bagtools.ndt.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
-from bagtools.ndt.grid import CELL_MODELS
-from bagtools.ndtodom.steps import FrontEndRun, ScanStep
+from bagtools.scan_matching import NdtReference, match_scans
+from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
+from bagtools.scan_matching.grid import CELL_MODELS
+from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.transforms import wrap_to_pi
 
 GUESSES = ("odom", "constant-velocity", "zero")

@@ -1,0 +1,10 @@
+"""Laser odometry: the front end that slam, ndt-odom and localize share.
+
+``LaserOdometry`` registers scans in order (:mod:`bagtools.odometry.frontend`); what it hands on is a
+``FrontEndRun`` of ``ScanStep`` (:mod:`bagtools.odometry.steps`).
+"""
+
+from bagtools.odometry.frontend import FrontEndOptions, LaserOdometry, cell_size_for, normalized_score
+from bagtools.odometry.steps import FrontEndRun, ScanStep
+
+__all__ = ["FrontEndOptions", "FrontEndRun", "LaserOdometry", "ScanStep", "cell_size_for", "normalized_score"]
