@@ -22,9 +22,10 @@ sysdeps:
 	fi
 
 $(VENV)/.installed: pyproject.toml
+	@echo "setting up $(VENV): a virtual environment with bagtools and its dependencies (a few minutes the first time)"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test]'
+	$(PY) -m pip install -e '.[test]'
 	touch $@
 
 setup: sysdeps $(VENV)/.installed

@@ -133,14 +133,16 @@ def format_description(desc: BagDescription) -> str:
     """Human-readable text for ``bagtools info``."""
     lines = [
         f"path:       {desc.path}",
-        f"format:     {desc.kind}",
+        f"format:     {'CARMEN log (text lines, read as ROS 1 messages)' if desc.kind == 'carmen' else desc.kind}",
         f"duration:   {desc.duration_s:.3f} s",
         f"start:      {_iso(desc.start_ns)} ({_seconds(desc.start_ns)} s)",
         f"end:        {_iso(desc.end_ns)} ({_seconds(desc.end_ns)} s)",
         f"messages:   {desc.message_count}",
     ]
     s = desc.storage
-    if s is not None:
+    if s is not None and desc.kind == "carmen":
+        lines += [f"bag size:   {_size_text(s.size_bytes)}"]
+    elif s is not None:
         distro = s.ros_distro or f"unknown (ROS {s.ros_version})"
         lines += [f"storage id: {s.storage_id}", f"bag size:   {_size_text(s.size_bytes)}", f"ROS distro: {distro}",
                   f"serialization format: {', '.join(s.serialization_formats) or 'unknown'}"]

@@ -14,6 +14,8 @@ import os
 from bagtools.errors import BagtoolsError
 
 ENV_VAR = "BAGTOOLS_MEMORY_BUDGET"
+#: A map's origin or a pose in it beyond this (m) from its frame's origin is damage or a typo, not a building.
+MAX_MAP_ORIGIN_M = 1.0e7
 _UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
 
 

@@ -68,6 +68,9 @@ def read_poses(bag: BagReader, topic: str,
         return None
     msgtype = bag.topics[topic].msgtype
     if msgtype not in ODOMETRY_TYPES + POSE_WITH_COVARIANCE_TYPES:
+        if warnings is not None:
+            warnings.append(f"{topic} has type {msgtype}, not nav_msgs/Odometry or "
+                            "geometry_msgs/PoseWithCovarianceStamped: its poses are not read")
         return None
     decode = decode_odometry if msgtype in ODOMETRY_TYPES else decode_pose_with_covariance
     samples = [decode(rec.msg) for rec in bag.messages([topic])]

@@ -39,3 +39,12 @@ def test_the_license_ships_and_the_metadata_says_which() -> None:
     assert project["license"] == "Apache-2.0" and project["license-files"] == ["LICENSE"]
     assert (REPO / "LICENSE").read_text().lstrip().startswith("Apache License")
     assert project["requires-python"] == ">=3.11" and project["classifiers"]
+
+
+def test_the_source_distribution_carries_the_whole_test_tree() -> None:
+    """The sdist held the 4 top-level test files only: MANIFEST.in grafts the tests, the fixtures they read, the
+    docs they check and the bench, so the sdist runs its tests as the repository does."""
+    root = Path(__file__).resolve().parents[1]
+    lines = {line.strip() for line in (root / "MANIFEST.in").read_text().splitlines()}
+    assert {"graft tests", "graft fixtures", "graft docs", "graft bench"} <= lines
+    assert any(p.is_dir() and (p / "__init__.py").exists() for p in (root / "tests").iterdir())  # subfolders exist

@@ -23,6 +23,7 @@ from typing import Any
 
 from bagtools.errors import BagtoolsError
 from bagtools.outputs import OutputDir, check_outputs
+from bagtools.results import run_outputs
 
 #: What ``batch info`` writes in each bag's directory: ``bagtools info BAG --json`` output.
 INFO_FILES = ["info.json"]
@@ -155,7 +156,7 @@ def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
 def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.gridmap import GRID_MAP_FILES, GridMapPipeline, write_grid_map
 
-    check_outputs(out_dir, GRID_MAP_FILES, force)
+    check_outputs(out_dir, run_outputs(GRID_MAP_FILES, config.mcap), force)
     result = GridMapPipeline(bag, config.options, keep_scans=config.mcap).run()
     written = write_grid_map(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
@@ -179,7 +180,7 @@ def _ndt_odom_options(p: Mapping[str, Any]) -> WriterConfig:
 def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomPipeline, write_ndt_odom
 
-    check_outputs(out_dir, NDT_ODOM_FILES, force)
+    check_outputs(out_dir, run_outputs(NDT_ODOM_FILES, config.mcap), force)
     result = NdtOdomPipeline(bag, config.options, keep_scans=config.mcap).run()
     if result.problem is not None:  # as the command: a failed run changes nothing in its directory
         raise BagtoolsError(result.problem, bag)
@@ -208,7 +209,7 @@ def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
 def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.slam import SLAM_FILES, SlamPipeline, write_slam
 
-    check_outputs(out_dir, SLAM_FILES, force)
+    check_outputs(out_dir, run_outputs(SLAM_FILES, config.mcap), force)
     result = SlamPipeline(bag, config.options).run()
     written = write_slam(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
@@ -230,7 +231,7 @@ def _localize_options(p: Mapping[str, Any]) -> WriterConfig:
 def _localize(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
     from bagtools.localize import LOCALIZE_FILES, LocalizePipeline, write_localize
 
-    check_outputs(out_dir, LOCALIZE_FILES, force)
+    check_outputs(out_dir, run_outputs(LOCALIZE_FILES, config.mcap), force)
     map_yaml, options = config.options
     result = LocalizePipeline(bag, map_yaml, options, keep_scans=config.mcap).run()
     written = write_localize(result, out_dir, force, mcap=config.mcap)

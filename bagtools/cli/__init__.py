@@ -81,8 +81,10 @@ def _usage_line(exc: click.UsageError, argv: list[str]) -> str:
     problem = " ".join(exc.format_message().split()).rstrip(".")
     if problem:
         problem = problem[0].lower() + problem[1:]
-    command_line = isinstance(exc, click.BadParameter) and exc.param_hint == "COMMAND"  # no file is at fault
-    subject = None if command_line else _input_name(argv)
+    # A bad value of a parameter is said with the file it was given for; a command line that is wrong as a whole
+    # (an unexpected extra argument, a missing option, an unknown command) blames no file.
+    about_a_value = isinstance(exc, click.BadParameter) and not isinstance(exc, click.MissingParameter)
+    subject = _input_name(argv) if about_a_value and exc.param_hint != "COMMAND" else None
     prefix = f"{subject}: " if subject else ""
     return f"bagtools: {prefix}{problem} (see '{command} --help')"
 

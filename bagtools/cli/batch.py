@@ -8,6 +8,9 @@ import click
 
 from bagtools.errors import BagtoolsError
 
+#: More worker processes than this on one machine is a typo (each is a Python process of its own).
+MAX_WORKERS = 1024
+
 _COMMAND_ARGS = "bagtools.batch.command_args"
 _OUT_PLACEHOLDER = "<batch --out>"
 _MAX_FAILURES_SHOWN = 20
@@ -53,7 +56,7 @@ def _command_params(command: str, args: list[str]) -> dict:
 @click.argument("bags", nargs=-1, required=True)
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str),
               help="Output directory: DIR/<bag>/ per bag, and DIR/fleet.csv, fleet.parquet, fleet.png.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+@click.option("--workers", type=click.IntRange(min=1, max=MAX_WORKERS), default=None,
               help="Worker processes of the embedded Dask cluster  [default: one per core]")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Use an existing Dask cluster (e.g. tcp://host:8786) instead of starting one; its workers must "

@@ -23,9 +23,12 @@ def _stats_block(title: str, stats: dict) -> list[str]:
               help="Poses apart for the relative error (1: scan to scan; 20: the drift over 20 scans).")
 @click.option("--relations", type=click.Path(path_type=str), default=None,
               help="Score the estimate against this .relations file (Kuemmerle et al. 2009) at exact stamps.")
+@click.option("--t-max-diff", "t_max_diff", type=click.FloatRange(min=0, min_open=True, max=3600), default=None,
+              help="Largest difference of stamps (s) at which two poses pair, as evo's --t_max_diff  [default: 0.01 "
+                   "for trajectories, 1e-4 for relations]")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as one JSON object.")
 def evaluate(estimate: str, reference: str | None, align: bool, gap: int, relations: str | None,
-             as_json: bool) -> None:
+             t_max_diff: float | None, as_json: bool) -> None:
     """Errors of the TUM trajectory ESTIMATE against the TUM trajectory REFERENCE (and/or --relations).
 
     As evo computes them (equal to evo's numbers): the APE of the translation
@@ -36,6 +39,9 @@ def evaluate(estimate: str, reference: str | None, align: bool, gap: int, relati
     are paired by nearest stamp within 0.01 s. With --relations, the relations
     metric of the classic benchmarks (mean +- std of the translation and
     rotation errors), each relation at the estimate's poses at its very stamps.
+    When no pose pairs at all (trajectories of other clocks, relations of
+    another log), nothing is scored: one line says so with the nearest stamps'
+    offset, and the exit status is 2.
 
     \b
     Example:
@@ -54,7 +60,11 @@ def evaluate(estimate: str, reference: str | None, align: bool, gap: int, relati
         raise BagtoolsError("holds no pose", estimate)
     ref = read_tum(reference) if reference is not None else None
     rel = read_relations(relations) if relations is not None else None
-    result = evaluate_trajectory(est, ref, rel, gap=gap, align=align)
+    max_diff_ns = None if t_max_diff is None else int(round(t_max_diff * 1e9))
+    result = evaluate_trajectory(est, ref, rel, gap=gap, align=align, max_diff_ns=max_diff_ns)
+    for name, file in (("ape_translation_m", reference), ("relations", relations)):  # nothing paired: nothing scored
+        if "unavailable" in result.get(name, {}) and not result[name].get("used"):
+            raise BagtoolsError(result[name]["unavailable"], file)
     if as_json:
         click.echo(json.dumps(result))
         return

@@ -49,10 +49,11 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     """
     from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
     from bagtools.outputs import check_outputs
+    from bagtools.results import run_outputs
 
-    check_outputs(out_dir, GRID_MAP_FILES, force, inputs=[bag, *([poses] if poses not in ('tf', 'ground-truth') else [])])  # fail before the work, not after it
+    check_outputs(out_dir, run_outputs(GRID_MAP_FILES, not no_mcap), force, inputs=[bag, *([poses] if poses not in ('tf', 'ground-truth') else [])])  # fail before the work, not after it
 
-    options = GridMapOptions(topic=topic, frame=frame or GridMapOptions.default_frame(poses), poses=poses,
+    options = GridMapOptions(topic=topic, frame=GridMapOptions.default_frame(poses) if frame is None else frame, poses=poses,
                              resolution=resolution, max_range_m=max_range, base_frame=base_frame,
                              scan_frame_offset=scan_frame_offset)
     result = GridMapPipeline(bag, options, keep_scans=not no_mcap).run()

@@ -60,8 +60,9 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
     """
     from bagtools.localize import LOCALIZE_FILES, LocalizeOptions, LocalizePipeline, write_localize
     from bagtools.outputs import check_outputs
+    from bagtools.results import run_outputs
 
-    check_outputs(out_dir, LOCALIZE_FILES, force, inputs=[bag, map_yaml])  # fail before the work, not after it
+    check_outputs(out_dir, run_outputs(LOCALIZE_FILES, not no_mcap), force, inputs=[bag, map_yaml])  # fail before the work, not after it
     options = LocalizeOptions(topic=topic, initial_pose=initial_pose, use_odometry=not no_odometry,
                               scan_frame_offset=scan_frame_offset, smooth=not no_smoothing)
     result = LocalizePipeline(bag, map_yaml, options, keep_scans=not no_mcap).run()

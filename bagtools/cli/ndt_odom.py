@@ -67,8 +67,9 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
     from bagtools.errors import BagtoolsError
     from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
     from bagtools.outputs import check_outputs
+    from bagtools.results import run_outputs
 
-    check_outputs(out_dir, NDT_ODOM_FILES, force, inputs=[bag])  # fail before the work, not after it
+    check_outputs(out_dir, run_outputs(NDT_ODOM_FILES, not no_mcap), force, inputs=[bag])  # fail before the work, not after it
 
     options = NdtOdomOptions(topic=topic, init=init, search=not no_search, use_odometry=not no_odometry,
                              reference=reference, cell_size_m=cell_size, cell_model=cell_model, min_score=min_score,

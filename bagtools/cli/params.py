@@ -6,6 +6,8 @@ import math
 
 import click
 
+from bagtools.limits import MAX_MAP_ORIGIN_M
+
 
 #: How far from the robot base a laser can be mounted (m): farther is a typo or damage, and would size grids by it.
 MAX_SCAN_FRAME_OFFSET_M = 100.0
@@ -25,8 +27,9 @@ def initial_pose(ctx: click.Context, param: click.Parameter, value: str | None) 
     if value is None:
         return None
     pose = _xy_yaw(value)
-    if not all(math.isfinite(v) for v in pose):
-        raise click.BadParameter(f"expected three finite numbers, got {value!r}")
+    if not all(math.isfinite(v) for v in pose) or max(abs(pose[0]), abs(pose[1])) > MAX_MAP_ORIGIN_M:
+        raise click.BadParameter(f"expected three finite numbers, X and Y within {MAX_MAP_ORIGIN_M:g} m of the map's "
+                                 f"origin, got {value!r}")
     return pose
 
 

@@ -55,9 +55,10 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
       bagtools eval out/slam/trajectory.tum out/slam/ground_truth.tum --align --gap 20
     """
     from bagtools.outputs import check_outputs
+    from bagtools.results import run_outputs
     from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
 
-    check_outputs(out_dir, SLAM_FILES, force, inputs=[bag, *([relations] if relations else [])])  # fail before the work, not after it
+    check_outputs(out_dir, run_outputs(SLAM_FILES, not no_mcap), force, inputs=[bag, *([relations] if relations else [])])  # fail before the work, not after it
 
     options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
                           loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import io
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from bagtools.errors import BagtoolsError
+from bagtools.limits import MAX_MAP_ORIGIN_M
 from bagtools.figures import tidy_layout
 from bagtools.grid.occupancy import OccupancyGrid
 from bagtools.outputs import OutputDir, atomic_path
@@ -184,42 +184,58 @@ class Nav2Map:
         return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 
 
-_KEY_LINE = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\s*:\s*(.*?)\s*$")
+def _regular_file(path: Path, what: str) -> None:
+    """Refuse a ``what`` (map YAML, map image) that is missing, a directory, a pipe or a device (reading /dev/zero
+    or a FIFO never ends)."""
+    if not path.exists():
+        raise BagtoolsError(f"{what} not found", path)
+    if not path.is_file():
+        raise BagtoolsError(f"{what} is not a regular file (a directory, a pipe or a device)", path)
 
 
-def _parse_map_yaml(path: Path) -> dict[str, str]:
-    """The flat ``key: value`` mapping of a map YAML (comments and quotes stripped)."""
+def _parse_map_yaml(path: Path) -> dict[str, object]:
+    """The mapping of a map YAML, parsed as YAML (flow or block style, a byte-order mark allowed)."""
+    from ruamel.yaml import YAML, YAMLError
+
+    _regular_file(path, "map YAML")
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise BagtoolsError("map YAML not found", path) from None
+        text = path.read_text(encoding="utf-8-sig")
+        fields = YAML(typ="safe", pure=True).load(text)
     except (OSError, UnicodeDecodeError) as exc:
         raise BagtoolsError(f"cannot read map YAML ({exc.__class__.__name__})", path) from None
-    fields: dict[str, str] = {}
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].rstrip()
-        if not line.strip():
-            continue
-        match = _KEY_LINE.match(line.strip())
-        if match is None:
-            raise BagtoolsError(f"line {lineno} is not 'key: value': {raw.strip()!r}", path)
-        value = match.group(2)
-        if len(value) >= 2 and value[0] == value[-1] and value[0] in "'\"":
-            value = value[1:-1]
-        fields[match.group(1)] = value
+    except YAMLError as exc:
+        raise BagtoolsError(f"not YAML: {' '.join(str(exc).split())[:200]}", path) from None
+    if not isinstance(fields, dict):
+        raise BagtoolsError("map YAML is not a mapping of keys to values (image, resolution, origin, ...)", path)
     return fields
 
 
-def _number(fields: dict[str, str], key: str, path: Path) -> float:
+def _number(fields: dict[str, object], key: str, path: Path) -> float:
     if key not in fields:
         raise BagtoolsError(f"map YAML has no '{key}'", path)
     try:
-        value = float(fields[key])
-    except ValueError:
+        value = float(fields[key])  # type: ignore[arg-type]
+    except (TypeError, ValueError):
         raise BagtoolsError(f"'{key}' is not a number: {fields[key]!r}", path) from None
     if not math.isfinite(value):
         raise BagtoolsError(f"'{key}' is not finite: {fields[key]!r}", path)
     return value
+
+
+def _origin(fields: dict[str, object], path: Path) -> tuple[float, float, float]:
+    """``origin`` as [x, y, yaw] (a YAML list in flow or block style)."""
+    value = fields.get("origin")
+    if value is None:
+        raise BagtoolsError("map YAML has no 'origin'", path)
+    try:
+        origin = tuple(float(v) for v in value) if isinstance(value, (list, tuple)) else ()  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        origin = ()
+    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+        raise BagtoolsError(f"'origin' must be [x, y, yaw], got {value!r}", path)
+    if max(abs(origin[0]), abs(origin[1])) > MAX_MAP_ORIGIN_M:
+        raise BagtoolsError(f"'origin' {list(origin)} lies beyond {MAX_MAP_ORIGIN_M:g} m: not a map of a place", path)
+    return origin  # type: ignore[return-value]
 
 
 def _pgm_tokens(data: bytes, count: int, path: Path) -> tuple[list[int], int]:
@@ -245,10 +261,9 @@ def _pgm_tokens(data: bytes, count: int, path: Path) -> tuple[list[int], int]:
 def read_pgm(path: str | Path) -> np.ndarray:
     """A PGM image (binary P5 or ASCII P2, max value up to 255) as (rows, cols) uint8, row 0 at the top."""
     path = Path(path)
+    _regular_file(path, "map image")
     try:
         data = path.read_bytes()
-    except FileNotFoundError:
-        raise BagtoolsError("map image not found", path) from None
     except OSError as exc:
         raise BagtoolsError(f"cannot read map image ({exc.__class__.__name__})", path) from None
     magic = data[:2]
@@ -286,31 +301,25 @@ def read_nav2_map(yaml_path: str | Path) -> Nav2Map:
     yaml_path = Path(yaml_path)
     fields = _parse_map_yaml(yaml_path)
     image = fields.get("image", "")
-    if not image:
-        raise BagtoolsError("map YAML has no 'image'", yaml_path)
+    if not image or not isinstance(image, str):
+        raise BagtoolsError("map YAML has no 'image' file name", yaml_path)
     image_path = Path(image) if Path(image).is_absolute() else yaml_path.parent / image
     resolution = _number(fields, "resolution", yaml_path)
     if resolution <= 0:
         raise BagtoolsError(f"'resolution' must be positive, got {resolution}", yaml_path)
     occ_th = _number(fields, "occupied_thresh", yaml_path)
     free_th = _number(fields, "free_thresh", yaml_path)
-    origin_text = fields.get("origin")
-    if origin_text is None:
-        raise BagtoolsError("map YAML has no 'origin'", yaml_path)
-    match = re.fullmatch(r"\[(.*)\]", origin_text)
-    try:
-        origin = tuple(float(v) for v in match.group(1).split(",")) if match else ()
-    except ValueError:
-        origin = ()
-    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-        raise BagtoolsError(f"'origin' must be [x, y, yaw], got {origin_text!r}", yaml_path)
-    negate_text = fields.get("negate", "0").strip().lower()
+    origin = _origin(fields, yaml_path)
+    negate_text = str(fields.get("negate", "0")).strip().lower()
     if negate_text not in ("0", "1", "true", "false"):
         raise BagtoolsError(f"'negate' must be 0 or 1, got {negate_text!r}", yaml_path)
     negate = negate_text in ("1", "true")
-    mode = fields.get("mode", "trinary").strip().lower()
+    mode = str(fields.get("mode", "trinary")).strip().lower()
     if mode not in ("trinary", "scale", "raw"):
         raise BagtoolsError(f"'mode' must be trinary, scale or raw, got {mode!r}", yaml_path)
+    if mode == "scale" and not occ_th > free_th:  # scale maps the shades between them: none between equal ones
+        raise BagtoolsError(f"mode scale needs occupied_thresh above free_thresh, got {occ_th} and {free_th}",
+                            yaml_path)
     pixels = read_pgm(image_path)
     shade = pixels.astype(np.float64) / 255.0
     occ = shade if negate else 1.0 - shade

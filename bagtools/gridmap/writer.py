@@ -8,7 +8,7 @@ from pathlib import Path
 from bagtools.grid import nav2_map_files, render_map_png
 from bagtools.gridmap.pipeline import GridMapResult
 from bagtools.outputs import OutputDir
-from bagtools.results import RESULTS_MCAP, ResultsBag
+from bagtools.results import RESULTS_MCAP, ResultsBag, run_outputs
 
 GRID_MAP_FILES = ["map.pgm", "map.yaml", "map.png", "summary.json", RESULTS_MCAP]
 
@@ -23,7 +23,7 @@ def write_grid_map(result: GridMapResult, out_dir: str | Path, force: bool = Fal
     s = result.summary
     title = f"{s.get('topic', '')} in {s.get('frame', 'map')}, {result.grid.cell_size_m:g} m/cell"
     written = ["map.pgm", "map.yaml", "map.png", "summary.json"]
-    with OutputDir(out_dir, GRID_MAP_FILES, force) as staged:
+    with OutputDir(out_dir, run_outputs(GRID_MAP_FILES, mcap), force) as staged:
         for name, data in nav2_map_files(result.grid, "map").items():
             (staged / name).write_bytes(data)
         (staged / "map.png").write_bytes(render_map_png(result.grid, result.scan_path_xy, title=title))

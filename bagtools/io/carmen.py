@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -65,6 +66,27 @@ _ODOM_KINDS = ("ODOM", "FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2")
 _KNOWN = set(_TOPIC_OF_KIND) | {"ODOM", "PARAM"}
 
 
+def _read(path: Path, limit: int | None = None) -> tuple[bytes, bool]:
+    """The bytes of a log (gunzipped when named .gz), at most about ``limit``, and whether a gzip stream was cut
+    short (what was readable before the cut is returned)."""
+    if not path.name.lower().endswith(".gz"):
+        with open(path, "rb") as f:
+            return (f.read() if limit is None else f.read(limit)), False
+    parts: list[bytes] = []
+    size = 0
+    with gzip.open(path, "rb") as f:
+        try:
+            while limit is None or size < limit:
+                part = f.read1(1 << 20)
+                if not part:
+                    break
+                parts.append(part)
+                size += len(part)
+        except (EOFError, gzip.BadGzipFile, zlib.error):
+            return b"".join(parts), True
+    return b"".join(parts), False
+
+
 def looks_like_carmen(path: Path) -> bool:
     """True if ``path`` is named as a CARMEN log (.clf/.log, optionally .gz) and its first line that is not a
     comment starts with a CARMEN keyword."""
@@ -73,10 +95,8 @@ def looks_like_carmen(path: Path) -> bool:
     if not stem.endswith(CARMEN_SUFFIXES):
         return False
     try:
-        opener = gzip.open if name.endswith(".gz") else open
-        with opener(path, "rb") as f:
-            head = f.read(65536)
-    except (OSError, EOFError):
+        head, _ = _read(path, 65536)
+    except OSError:
         return False
     for line in head.splitlines():
         words = line.split()
@@ -119,8 +139,42 @@ def _floats(words: list[bytes]) -> list[float]:
     return [float(w) for w in words]
 
 
+def _ranges(words: list[bytes]) -> np.ndarray:
+    """Readings as float32; one past float32's range (3.4e38) becomes +inf, a no-return reading."""
+    with np.errstate(over="ignore"):
+        return np.asarray(_floats(words), dtype=np.float32)
+
+
+#: Stamps as int64 nanoseconds end in the year 2262.
+MAX_STAMP_NS = 2**63 - 1
+
+
 def _stamp(word: bytes) -> int:
-    return stamp_text_to_ns(word.decode("ascii", "replace"))
+    stamp = stamp_text_to_ns(word.decode("ascii", "replace"))
+    if not 0 <= stamp <= MAX_STAMP_NS:
+        raise ValueError(f"stamp {word.decode('ascii', 'replace')} is outside 0 .. year 2262 (int64 nanoseconds)")
+    return stamp
+
+
+def _field_count(kind: str, words: list[bytes]) -> int:
+    """How many fields (after the keyword) a line of ``kind`` must have, from the counts it gives; ValueError for
+    a negative count. A line with another number of fields is damaged: its stamp and poses would be read from
+    the wrong fields."""
+    if kind == "ODOM":
+        return 9
+    if kind in ("FLASER", "RLASER"):
+        n = _count(words[0])
+        return n + 10
+    n = _count(words[7])
+    m = _count(words[8 + n])
+    return n + m + (12 if kind.startswith("RAWLASER") else 23)
+
+
+def _count(word: bytes) -> int:
+    n = int(word)
+    if n < 0:
+        raise ValueError(f"a reading count of {n}")
+    return n
 
 
 def _stamp_index(kind: str, words: list[bytes]) -> int:
@@ -139,14 +193,14 @@ def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float]) ->
     which do not say it (:meth:`CarmenSource._max_range_of`)."""
     if kind in ("FLASER", "RLASER"):
         n = int(words[0])
-        ranges = np.asarray(_floats(words[1:1 + n]), dtype=np.float32)
+        ranges = _ranges(words[1:1 + n])
         start, increment = carmen_beam_geometry(n)
         max_range = max_ranges.get(kind, FLASER_MAX_RANGE_M)
         return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, None)
     # RAWLASERk / ROBOTLASERk: laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
     start, _fov, increment, max_range = _floats(words[1:5])
     n = int(words[7])
-    ranges = np.asarray(_floats(words[8:8 + n]), dtype=np.float32)
+    ranges = _ranges(words[8:8 + n])
     k = 8 + n
     n_remissions = int(words[k])
     k += 1 + n_remissions
@@ -186,10 +240,12 @@ class CarmenSource:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        opener = gzip.open if path.name.lower().endswith(".gz") else open
-        with opener(path, "rb") as f:
-            self._lines = f.read().splitlines()
+        data, cut = _read(path)
+        self._lines = data.splitlines()
         self.warnings: list[str] = []
+        if cut:  # the last line may be cut too: it is checked like any other
+            self.warnings.append(f"{path}: truncated gzip stream: read the {len(self._lines)} lines before the cut, "
+                                 "the rest of the log is lost")
         self.typestore = _typestore()
         self._types = self.typestore.types
         self.params: dict[str, float] = {}  # PARAM lines, as they come (a parameter logged later is not yet known)
@@ -214,9 +270,10 @@ class CarmenSource:
                 continue
             text = words[1:]
             try:
+                expected = _field_count(kind, text)
+                if len(text) != expected:
+                    raise ValueError(f"{kind} line has {len(text)} fields where its counts say {expected}")
                 at = _stamp_index(kind, text)
-                if len(text) < at + 1:
-                    raise IndexError(f"{kind} line ends early ({len(text)} fields)")
                 stamp = _parse_odom(text)[0] if kind == "ODOM" else _stamp(text[at])
                 if self._mount is None and kind == "ROBOTLASER1":
                     self._mount = _parse_laser(kind, text, {}).laser_in_base
@@ -276,11 +333,12 @@ class CarmenSource:
         for i in indexes[:NO_RETURN_SAMPLE]:
             words = self._lines[i].split()
             try:
-                readings.append(np.asarray(_floats(words[2:2 + int(words[1])]), dtype=np.float32))
+                readings.append(_ranges(words[2:2 + int(words[1])]))
             except (ValueError, IndexError):  # a damaged line: skipped (and said) when read
                 continue
         if len(readings) < NO_RETURN_MIN_LINES:
             return FLASER_MAX_RANGE_M
+        readings = [r[np.isfinite(r)] for r in readings]  # a reading past float32's range is no return, not a range
         top = max(float(r.max(initial=0.0)) for r in readings)
         lines_at_top = sum(bool((r == top).any()) for r in readings)
         values = np.concatenate(readings)

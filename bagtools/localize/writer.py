@@ -11,7 +11,7 @@ import numpy as np
 from bagtools.grid import Nav2Map, OccupancyGrid
 from bagtools.localize.pipeline import MAP_FRAME, PART_DEG, PART_M, LocalizeResult
 from bagtools.outputs import OutputDir
-from bagtools.results import RESULTS_MCAP, Markers, ResultsBag
+from bagtools.results import RESULTS_MCAP, Markers, ResultsBag, run_outputs
 from bagtools.slam.render import render_slam_map_png
 from bagtools.trajectory import tum_text
 
@@ -30,7 +30,7 @@ def write_localize(result: LocalizeResult, out_dir: str | Path, force: bool = Fa
     ``mcap`` results.mcap (the map, the paths, /tf and the scans).
     """
     written: list[str] = []
-    with OutputDir(out_dir, LOCALIZE_FILES, force) as staged:
+    with OutputDir(out_dir, run_outputs(LOCALIZE_FILES, mcap), force) as staged:
         files = {"trajectory.tum": (result.trajectory, MAP_FRAME, result.base_frame),
                  "map_to_odom.tum": (result.map_to_odom, MAP_FRAME, "odom"),
                  "bag_localizer.tum": (result.bag_localizer, MAP_FRAME, result.base_frame),

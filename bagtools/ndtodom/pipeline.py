@@ -48,6 +48,8 @@ MATCH_MAX_RANGE_M = 100.0
 #: Repeated (frozen) scans are warned about when the odometry moves more than this meanwhile (m).
 FROZEN_SCANS_MOVED_M = 0.5
 REFERENCE_MODES = ("previous", "keyframe")
+#: What no ground robot does (m/s, rad/s): a --max-speed or --max-turn-rate beyond is a typo, not a robot.
+MAX_PLAUSIBLE_SPEED_MPS, MAX_PLAUSIBLE_TURN_RATE_RADPS = 100.0, 50.0
 ODOM_TOPIC = "/odom"
 
 
@@ -102,10 +104,11 @@ class NdtOdomOptions:
         if self.scan_frame_offset is not None and (len(self.scan_frame_offset) != 3
                                                    or not np.isfinite(self.scan_frame_offset).all()):
             raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
-        for name, flag in (("max_speed_mps", "--max-speed"), ("max_turn_rate_radps", "--max-turn-rate")):
+        for name, flag, most in (("max_speed_mps", "--max-speed", MAX_PLAUSIBLE_SPEED_MPS),
+                                 ("max_turn_rate_radps", "--max-turn-rate", MAX_PLAUSIBLE_TURN_RATE_RADPS)):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise BagtoolsError(f"{flag} must be a positive number, got {value}")
+            if not (math.isfinite(value) and 0 < value <= most):
+                raise BagtoolsError(f"{flag} must be a positive number no robot exceeds (at most {most:g}), got {value}")
         if self.max_iterations < 1:
             raise BagtoolsError(f"max_iterations must be at least 1, got {self.max_iterations}")
 

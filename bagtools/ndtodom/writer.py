@@ -10,7 +10,7 @@ import numpy as np
 from bagtools.ndtodom.pipeline import NdtOdomResult
 from bagtools.ndtodom.plots import render_scan_map_png, render_trajectories_png
 from bagtools.outputs import OutputDir
-from bagtools.results import RESULTS_MCAP, ResultsBag
+from bagtools.results import RESULTS_MCAP, ResultsBag, run_outputs
 from bagtools.trajectory import tum_text
 
 #: Every file the command may write (any existing one is refused without --force).
@@ -30,7 +30,7 @@ def write_ndt_odom(result: NdtOdomResult, out_dir: str | Path, force: bool = Fal
     frame = result.summary.get("odometry_frame", "odom")
     body = result.summary.get("base_frame")
     written: list[str] = []
-    with OutputDir(out_dir, NDT_ODOM_FILES, force) as staged:
+    with OutputDir(out_dir, run_outputs(NDT_ODOM_FILES, mcap), force) as staged:
         if result.trajectory is not None:
             for name, traj in (("trajectory.tum", result.trajectory), ("odometry.tum", result.odometry),
                                ("ground_truth.tum", result.ground_truth)):

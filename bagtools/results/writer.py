@@ -45,6 +45,12 @@ from bagtools.io.decode import LaserScanArrays
 from bagtools.transforms import quat2xyzw, tform2quat
 
 RESULTS_MCAP = "results.mcap"
+
+
+def run_outputs(names: list[str], mcap: bool) -> list[str]:
+    """The files a run writes of a command's ``names``: without results.mcap when the run writes none, so that
+    ``--force`` replaces (and removes as stale) only what the run itself writes."""
+    return [n for n in names if mcap or n != RESULTS_MCAP]
 """The file name every mapping command writes its results bag under."""
 
 _STORES = {"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}

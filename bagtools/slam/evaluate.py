@@ -22,6 +22,7 @@ from bagtools.errors import BagtoolsError
 from bagtools.trajectory import (
     ErrorStats, Relations, Trajectory, ape_translation, associate, relation_errors, rpe_translation,
 )
+from bagtools.trajectory.metrics import DEFAULT_MAX_DIFF_NS
 from bagtools.transforms import se2_between, tform2pose
 
 #: Pose gaps reported by :func:`trajectory_errors`.
@@ -41,9 +42,9 @@ def align_se2(source_xy: np.ndarray, target_xy: np.ndarray) -> tuple[np.ndarray,
     return R, mq - R @ mp
 
 
-def ape_aligned(reference: Trajectory, estimate: Trajectory) -> ErrorStats:
+def ape_aligned(reference: Trajectory, estimate: Trajectory, max_diff_ns: int = DEFAULT_MAX_DIFF_NS) -> ErrorStats:
     """Translation APE (m) after the best planar rigid alignment of the estimate onto the reference."""
-    ref, est = associate(reference, estimate)
+    ref, est = associate(reference, estimate, max_diff_ns)
     if len(ref) < 2:
         raise BagtoolsError("fewer than two poses of the estimate match the reference's stamps")
     R, t = align_se2(est.positions[:, :2], ref.positions[:, :2])
@@ -51,9 +52,9 @@ def ape_aligned(reference: Trajectory, estimate: Trajectory) -> ErrorStats:
     return ErrorStats.of(np.linalg.norm(moved - ref.positions[:, :2], axis=1))
 
 
-def gap_errors(reference: Trajectory, estimate: Trajectory, gap: int) -> dict:
+def gap_errors(reference: Trajectory, estimate: Trajectory, gap: int, max_diff_ns: int = DEFAULT_MAX_DIFF_NS) -> dict:
     """Relative errors over pairs of associated poses ``gap`` apart (see the module docstring)."""
-    ref, est = associate(reference, estimate)
+    ref, est = associate(reference, estimate, max_diff_ns)
     if len(ref) <= gap:
         raise BagtoolsError(f"fewer than {gap + 1} poses of the estimate match the reference's stamps")
     q, p = tform2pose(ref.poses), tform2pose(est.poses)
@@ -65,24 +66,27 @@ def gap_errors(reference: Trajectory, estimate: Trajectory, gap: int) -> dict:
 
 
 def evaluate(estimate: Trajectory, reference: Trajectory | None, relations: Relations | None = None,
-             gap: int = 1, align: bool = False) -> dict:
+             gap: int = 1, align: bool = False, max_diff_ns: int | None = None) -> dict:
     """What ``bagtools eval`` reports of ``estimate``: against ``reference`` evo's APE (and, with ``align``, the
     APE after the best SE(2) alignment), evo's RPE per metre and the error over ``gap`` poses; against
-    ``relations`` the metric of Kuemmerle et al. Each part that cannot be computed says why."""
+    ``relations`` the metric of Kuemmerle et al. Poses pair within ``max_diff_ns`` (default: evo's 10 ms for
+    trajectories, the relations' own tolerance for relations). Each part that cannot be computed says why."""
     out: dict = {"poses": len(estimate)}
+    diff = DEFAULT_MAX_DIFF_NS if max_diff_ns is None else max_diff_ns
     if reference is not None:
-        parts = [("ape_translation_m", lambda: ape_translation(reference, estimate).as_dict()),
-                 ("rpe_translation_m_per_1m", lambda: rpe_translation(reference, estimate, delta_m=1.0).as_dict()),
-                 (f"relative_gap_{gap}", lambda: gap_errors(reference, estimate, gap))]
+        parts = [("ape_translation_m", lambda: ape_translation(reference, estimate, diff).as_dict()),
+                 ("rpe_translation_m_per_1m", lambda: rpe_translation(reference, estimate, 1.0, diff).as_dict()),
+                 (f"relative_gap_{gap}", lambda: gap_errors(reference, estimate, gap, diff))]
         if align:
-            parts.insert(1, ("ape_aligned_m", lambda: ape_aligned(reference, estimate).as_dict()))
+            parts.insert(1, ("ape_aligned_m", lambda: ape_aligned(reference, estimate, diff).as_dict()))
         for name, fn in parts:
             try:
                 out[name] = fn()
             except BagtoolsError as err:
                 out[name] = {"unavailable": err.problem}
     if relations is not None:
-        out["relations"] = relation_errors(relations, estimate)
+        out["relations"] = (relation_errors(relations, estimate) if max_diff_ns is None
+                            else relation_errors(relations, estimate, max_diff_ns))
     return out
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from bagtools.grid import nav2_map_files
 from bagtools.outputs import OutputDir
-from bagtools.results import RESULTS_MCAP, Markers, ResultsBag
+from bagtools.results import RESULTS_MCAP, Markers, ResultsBag, run_outputs
 from bagtools.slam.pipeline import SLAM_FRAME, SlamResult
 from bagtools.slam.render import render_slam_map_png
 from bagtools.trajectory import tum_text
@@ -30,7 +30,7 @@ def write_slam(result: SlamResult, out_dir: str | Path, force: bool = False, mca
     written: list[str] = []
     s = result.summary
     base = _base_frame(result)
-    with OutputDir(out_dir, SLAM_FILES, force) as staged:
+    with OutputDir(out_dir, run_outputs(SLAM_FILES, mcap), force) as staged:
         for name, traj in (("trajectory.tum", result.trajectory), ("odometry.tum", result.odometry),
                            ("ground_truth.tum", result.ground_truth)):
             if traj is not None:

@@ -72,6 +72,10 @@ def _nearest_within(short_ns: np.ndarray, long_ns: np.ndarray, max_diff_ns: int)
     return np.flatnonzero(keep), np.where(take_upper, upper, lower)[keep]
 
 
+def _duration_text(ns: int) -> str:
+    return f"{ns / 1e9:.3f} s" if ns >= 1_000_000_000 else f"{ns / 1e6:.3f} ms"
+
+
 def associate(ref: Trajectory, est: Trajectory, max_diff_ns: int = DEFAULT_MAX_DIFF_NS) -> tuple[Trajectory, Trajectory]:
     """The pairs of poses of ``ref`` and ``est`` at matching stamps (evo's nearest-time association).
 
@@ -87,7 +91,11 @@ def associate(ref: Trajectory, est: Trajectory, max_diff_ns: int = DEFAULT_MAX_D
     short, long_ = (ref, est) if est_longer else (est, ref)
     i_short, i_long = _nearest_within(short.stamps_ns, long_.stamps_ns, int(max_diff_ns))
     if i_short.size == 0:
-        raise BagtoolsError(f"no matching stamps between the trajectories within {max_diff_ns / 1e9:g} s")
+        at = np.clip(np.searchsorted(long_.stamps_ns, short.stamps_ns), 1, max(len(long_) - 1, 1))
+        gap_ns = np.minimum(np.abs(long_.stamps_ns[at] - short.stamps_ns),
+                            np.abs(long_.stamps_ns[at - 1] - short.stamps_ns)).min()
+        raise BagtoolsError(f"no pose of one trajectory has a pose of the other within {max_diff_ns / 1e9:g} s (the "
+                            f"nearest stamps are {_duration_text(int(gap_ns))} apart; --t-max-diff sets the tolerance)")
     short_m = Trajectory(short.stamps_ns[i_short], short.poses[i_short])
     long_m = Trajectory(long_.stamps_ns[i_long], long_.poses[i_long])
     return (short_m, long_m) if est_longer else (long_m, short_m)

@@ -95,8 +95,12 @@ def read_tum(path: str | Path) -> Trajectory:
     or repeat.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise BagtoolsError("no such trajectory file", path)
+    if path.is_dir():
+        raise BagtoolsError("is a directory, not a trajectory file", path)
+    if not path.is_file():  # a FIFO, a device such as /dev/zero: not a file to read to its end
+        raise BagtoolsError("is not a regular file (a pipe or a device), not a trajectory file", path)
     try:
         text_lines = path.read_text(encoding="utf-8").splitlines()
     except (UnicodeDecodeError, OSError) as err:

@@ -99,3 +99,40 @@ def test_a_scan_of_millions_of_beams_is_inserted_in_parts() -> None:
     small = OccupancyGrid(10.0, 10.0, 20.0, np.array([-5.0, -5.0]))
     small.insert_ray(np.zeros(3), np.full(3600, 2.0), np.linspace(-np.pi, np.pi, 3600, endpoint=False), 3.5)
     assert np.array_equal(grid.occupancy_matrix() > 0.5, small.occupancy_matrix() > 0.5)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["slam", "a.clf", "b.clf", "--out", "x"], "bagtools: got unexpected extra argument (b.clf) (see 'bagtools slam --help')"),
+    (["slam", "a.clf"], "bagtools: missing option '--out' (see 'bagtools slam --help')"),
+])
+def test_a_wrong_command_line_blames_no_file(argv: list[str], expected: str, capsys) -> None:
+    """The command line is wrong as a whole: a.clf is not at fault (it was named as the culprit)."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2 and capsys.readouterr().err == expected + "\n"
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["grid", BAG, "--out", "{out}", "--frame", ""], "--frame must be a tf frame id"),
+    (["ndt-odom", BAG, "--out", "{out}", "--max-speed", "1e9"], "--max-speed must be a positive number no robot exceeds"),
+    (["ndt-odom", BAG, "--out", "{out}", "--max-turn-rate", "1e9"], "--max-turn-rate must be a positive number"),
+    (["batch", "info", BAG, "--out", "{out}", "--workers", "99999999999999999999"], "invalid value for '--workers'"),
+])
+def test_options_no_run_can_mean_are_refused(argv: list[str], expected: str, tmp_path: Path, capsys) -> None:
+    """They were taken as given: --frame '' ran as map, a 1e9 m/s robot, a batch of 1e20 workers exited 0."""
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_info:
+        main([a.replace("{out}", str(out)) for a in argv])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and err.count("\n") == 1 and expected in err, err
+    assert not out.exists()
+
+
+def test_an_initial_pose_off_any_map_is_refused(tmp_path: Path, capsys) -> None:
+    """1e308 leaked numpy RuntimeWarnings (overflow) to stderr before any error."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["localize", BAG, "--map", str(tmp_path / "map.yaml"), "--out", str(tmp_path / "out"),
+              "--initial-pose", "1e308,0,0"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and err.count("\n") == 1 and "within 1e+07 m of the map's origin" in err, err
+    assert "Warning" not in err

@@ -84,6 +84,9 @@ def test_relations_at_exact_stamps(files, tmp_path: Path, capsys) -> None:
     (["{dir}/missing.tum", "{ref}"], "missing.tum: no such trajectory file"),
     (["{est}", "{ref}", "--gap", "0"], "invalid value for '--gap'"),
     (["{est}", "--relations", "{dir}/missing.relations"], "cannot read the relations file"),
+    (["{dir}", "{ref}"], "is a directory, not a trajectory file"),
+    (["/dev/zero", "{ref}"], "/dev/zero: is not a regular file (a pipe or a device)"),
+    (["{est}", "{ref}", "--t-max-diff", "0"], "invalid value for '--t-max-diff'"),
 ])
 def test_bad_input_is_one_line(argv: list[str], problem: str, files, tmp_path: Path, capsys) -> None:
     est_path, ref_path, _, _ = files
@@ -95,3 +98,24 @@ def test_bad_input_is_one_line(argv: list[str], problem: str, files, tmp_path: P
 def test_help_has_an_example(capsys) -> None:
     code, out, _ = run(["eval", "--help"], capsys)
     assert code == 0 and "Example:" in out and "bagtools eval" in out
+
+
+def test_trajectories_that_never_pair_are_refused_with_the_offset(files, tmp_path: Path, capsys) -> None:
+    """Stamps 20 ms apart (another clock): every figure was "unavailable" with exit 0; now exit 2 with the offset,
+    and --t-max-diff pairs them (evo's --t_max_diff)."""
+    est_path, _, est, ref = files
+    write_tum(tmp_path / "late.tum", Trajectory(ref.stamps_ns + 20_000_000, ref.poses))
+    code, out, err = run(["eval", str(est_path), str(tmp_path / "late.tum")], capsys)
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert "within 0.01 s (the nearest stamps are 20.000 ms apart; --t-max-diff sets the tolerance)" in err
+    code, out, err = run(["eval", str(est_path), str(tmp_path / "late.tum"), "--t-max-diff", "0.03"], capsys)
+    assert code == 0 and "pairs  400" in out, err
+
+
+def test_relations_of_another_log_are_refused(files, tmp_path: Path, capsys) -> None:
+    est_path, _, est, ref = files
+    relations = relations_from_trajectory(Trajectory(ref.stamps_ns + 5_000_000_000_000, ref.poses),
+                                          np.array([[0, 50], [10, 200]]))
+    (tmp_path / "other.relations").write_text(relations_text(relations))
+    code, out, err = run(["eval", str(est_path), "--relations", str(tmp_path / "other.relations")], capsys)
+    assert code == 2 and err.count("\n") == 1 and "no relation has poses of the trajectory at both stamps" in err

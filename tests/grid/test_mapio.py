@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 
 import numpy as np
 import pytest
@@ -118,7 +119,11 @@ GOOD_YAML = "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccup
         (GOOD_YAML.replace("resolution: 0.05", "resolution: fine"), b"P5\n1 1\n255\n\x00", "not a number"),
         (GOOD_YAML.replace("resolution: 0.05", "resolution: -1"), b"P5\n1 1\n255\n\x00", "positive"),
         (GOOD_YAML.replace("image: m.pgm\n", ""), b"P5\n1 1\n255\n\x00", "image"),
-        (GOOD_YAML + "- a list item\n", b"P5\n1 1\n255\n\x00", "key: value"),
+        (GOOD_YAML + "- a list item\n", b"P5\n1 1\n255\n\x00", "not YAML"),
+        ("- image: m.pgm\n", b"P5\n1 1\n255\n\x00", "not a mapping"),
+        (GOOD_YAML.replace("origin: [0, 0, 0]", "origin: [1e308, 0, 0]"), b"P5\n1 1\n255\n\x00", "not a map of a place"),
+        (GOOD_YAML.replace("free_thresh: 0.196", "free_thresh: 0.65") + "mode: scale\n",
+         b"P5\n1 1\n255\n\x00", "mode scale needs occupied_thresh above free_thresh"),
         (GOOD_YAML.replace("negate: 0", "negate: maybe"), b"P5\n1 1\n255\n\x00", "negate"),
         (GOOD_YAML + "mode: fancy\n", b"P5\n1 1\n255\n\x00", "mode"),
         (GOOD_YAML, b"\x89PNG\r\n\x1a\n", "not a PGM"),
@@ -136,6 +141,30 @@ def test_bad_map_files_raise_one_line_errors(tmp_path, yaml_text, image, match):
         read_nav2_map(tmp_path / "map.yaml")
     assert info.value.path is not None and info.value.path.endswith((".yaml", ".pgm"))
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("yaml_text", [
+    "{image: m.pgm, resolution: 0.05, origin: [0, 0, 0], negate: 0, occupied_thresh: 0.65, free_thresh: 0.196}\n",
+    "image: m.pgm\nresolution: 0.05\norigin:\n  - 0\n  - 0\n  - 0\nnegate: 0\noccupied_thresh: 0.65\n"
+    "free_thresh: 0.196\n",
+    "\ufeff" + GOOD_YAML,
+])
+def test_map_yaml_in_any_yaml_style_reads(tmp_path, yaml_text):
+    """A flow mapping, a block list and a byte-order mark are YAML as map_server reads it (they were refused)."""
+    (tmp_path / "map.yaml").write_text(yaml_text, encoding="utf-8")
+    (tmp_path / "m.pgm").write_bytes(b"P5\n2 1\n255\n\x00\xfe")
+    assert read_nav2_map(tmp_path / "map.yaml").occupancy.tolist() == [[100, 0]]
+
+
+def test_a_map_image_that_is_a_pipe_or_a_device_is_refused(tmp_path):
+    """Reading a FIFO hung; /dev/zero grew to 3.8 GB before 'out of memory' named the bag."""
+    fifo = tmp_path / "m.pgm"
+    os.mkfifo(fifo)
+    for image in (str(fifo), "/dev/zero"):
+        (tmp_path / "map.yaml").write_text(GOOD_YAML.replace("m.pgm", image))
+        with pytest.raises(BagtoolsError, match="map image is not a regular file") as info:
+            read_nav2_map(tmp_path / "map.yaml")
+        assert info.value.path == image
 
 
 def test_png_render_has_metric_extent_and_trajectory(tmp_path):

@@ -239,7 +239,7 @@ def test_bad_input_is_one_line_and_exit_2(world: dict, tmp_path: Path, capsys, c
     err = capsys.readouterr().err.strip().splitlines()
     assert done.value.code == 2 and len(err) == 1 and err[0].startswith("bagtools: "), err
     assert not (tmp_path / "out").exists()
-    expected = {"another place": "could be placed in the map", "not a map": "not 'key: value'",
+    expected = {"another place": "could be placed in the map", "not a map": "map YAML has no 'image'",
                 "no scans": "expected sensor_msgs/msg/LaserScan", "bad initial pose": "X,Y,YAW",
                 "empty map": "at least 5 occupied places"}[case]
     assert expected in err[0]

@@ -119,16 +119,18 @@ def test_ndt_odom_results_hold_the_trajectories(tmp_path: Path) -> None:
     assert len(msgs["/ground_truth"][0][1].poses) > 0 and msgs["/cloud_map"][0][1].width > 300
 
 
-def test_no_mcap_skips_it_and_removes_an_old_one_with_force(tmp_path: Path) -> None:
+def test_no_mcap_skips_it_and_leaves_an_earlier_one_alone(tmp_path: Path) -> None:
+    """--force replaces only what the run itself writes: a run without results.mcap neither needs --force for an
+    earlier one nor deletes it (the developers' guide; it was deleted)."""
     out = tmp_path / "grid"
     run = [sys.executable, "-m", "bagtools", "grid", str(FIXTURE), "--out", str(out)]
     assert subprocess.run(run, capture_output=True, timeout=300).returncode == 0
-    assert (out / "results.mcap").is_file()
+    earlier = (out / "results.mcap").read_bytes()
     again = subprocess.run(run + ["--no-mcap"], capture_output=True, text=True, timeout=300)
-    assert again.returncode == 2 and "already exists" in again.stderr  # an old results.mcap is not left behind
+    assert again.returncode == 2 and "map.pgm: already exists" in again.stderr  # the run's own outputs need --force
     forced = subprocess.run(run + ["--no-mcap", "--force"], capture_output=True, text=True, timeout=300)
     assert forced.returncode == 0, forced.stderr
-    assert not (out / "results.mcap").exists() and (out / "map.yaml").is_file()
+    assert (out / "results.mcap").read_bytes() == earlier and (out / "map.yaml").is_file()
 
 
 @pytest.mark.parametrize("command", ["grid", "map-cloud", "ndt-odom", "slam"])
