@@ -31,7 +31,10 @@ def read_sim_info(bag: BagReader) -> dict[str, Any] | None:
     """The JSON document of ``/simulation/world`` ({"world", "config", "robot"}), or None for other bags."""
     if SIM_WORLD_TOPIC not in bag.topics:
         return None
-    record = next(bag.messages([SIM_WORLD_TOPIC]), None)
+    try:
+        record = next(bag.messages([SIM_WORLD_TOPIC]), None)
+    except BagError:  # lost to damage (said among the bag's warnings): what needs only the bag goes on without it
+        return None
     if record is None:
         return None
     try:

@@ -84,5 +84,5 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
         ape, aligned = errors.get("ape_m", {}).get("rmse"), errors.get("ape_aligned_m", {}).get("rmse")
         if ape is not None and aligned is not None:
             click.echo(f"APE against /ground_truth, {label}: {ape:.4f} m (rmse), {aligned:.4f} m after SE(2) alignment "
-                       "(a map made by SLAM has its own frame)")
+                       "(the aligned figure counts when the map has a frame of its own, as a SLAM map does)")
     click.echo(f"wrote {', '.join(p.name for p in written)} in {out_dir}")

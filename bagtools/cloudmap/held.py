@@ -4,12 +4,16 @@ map-cloud reads a bag once: the clouds (cut and sampled, in their sensor
 frame) come in with the tf messages, and are placed once all of tf is read
 (repaired as a whole, as tf2 would see it at the end of the bag). What waits
 is kept in memory up to a budget; beyond it, batches go to a temporary
-directory and are read back in order.
+directory (``bagtools-held-<pid>-*``) and are read back in order. A run
+killed with SIGKILL cannot remove its directory: the next run that spills
+removes every such directory whose process is gone.
 """
 
 from __future__ import annotations
 
+import os
 import pickle
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,6 +22,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from bagtools.cloudmap.accumulator import MapCloud
+from bagtools.errors import BagtoolsError
+
+HELD_PREFIX = "bagtools-held-"
 
 #: Bytes of held points kept in memory; more are written to a temporary directory in batches of this size.
 MEMORY_BUDGET_BYTES = 64 * 1024 * 1024
@@ -61,10 +68,15 @@ class HeldClouds:
 
     def _spill(self) -> None:
         if self._dir is None:
-            self._dir = tempfile.TemporaryDirectory(prefix="bagtools-held-")
+            remove_orphans()
+            self._dir = tempfile.TemporaryDirectory(prefix=f"{HELD_PREFIX}{os.getpid()}-")
         path = Path(self._dir.name) / f"{len(self._spilled):06d}.pickle"
-        with path.open("wb") as f:
-            pickle.dump(self._batch, f, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            with path.open("wb") as f:
+                pickle.dump(self._batch, f, protocol=pickle.HIGHEST_PROTOCOL)
+        except OSError as err:  # a full temporary directory is the temporary directory's problem, not the bag's
+            raise BagtoolsError(f"cannot hold clouds there while tf is read ({err.strerror or err}); set TMPDIR to a "
+                                "directory with room", self._dir.name) from err
         self._spilled.append(path)
         self.spilled_batches += 1
         self._batch, self._batch_bytes = [], 0
@@ -83,3 +95,26 @@ class HeldClouds:
             self._dir.cleanup()
             self._dir = None
         self._batch, self._spilled = [], []
+
+
+def remove_orphans(directory: str | None = None) -> list[Path]:
+    """Remove the spill directories of map-cloud runs whose process is gone (killed by SIGKILL, which no cleanup
+    survives) from ``directory`` (default: the temporary directory); returns them."""
+    removed = []
+    for path in Path(directory or tempfile.gettempdir()).glob(f"{HELD_PREFIX}*-*"):
+        pid_text = path.name[len(HELD_PREFIX):].split("-", 1)[0]
+        if not pid_text.isdigit() or _alive(int(pid_text)) or not path.is_dir():
+            continue
+        shutil.rmtree(path, ignore_errors=True)
+        removed.append(path)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True

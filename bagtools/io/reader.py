@@ -510,7 +510,9 @@ class BagReader:
         finally:
             damage = self._warn_read_damage()
         if n == 0 and damage:
-            raise BagError(f"damaged MCAP, no message could be read: {damage[0]}", self.path)
+            what = "no message" if wanted is None else f"no message of {', '.join(sorted(wanted))}"
+            raise BagError(f"damaged MCAP: {what} could be read (all of it lay in damaged chunks; the rest of the bag "
+                           f"may be intact): {damage[0]}", self.path)
 
     def _warn_read_damage(self) -> list[str]:
         """Say the damage met in MCAP chunks that were first checked while being read; return it."""

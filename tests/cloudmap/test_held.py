@@ -9,7 +9,7 @@ import numpy as np
 import bagtools.cloudmap.pipeline as pipeline
 from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
 from bagtools.cloudmap.accumulator import MapCloud
-from bagtools.cloudmap.held import HeldCloud, HeldClouds
+from bagtools.cloudmap.held import HELD_PREFIX, HeldCloud, HeldClouds
 from tests.conftest import FIXTURES
 
 LAP = FIXTURES / "sim_lap_cloud_20s"
@@ -45,3 +45,43 @@ def test_a_map_held_on_disk_is_the_map_held_in_memory(monkeypatch) -> None:
     assert spilled and spilled[0].spilled_batches > 3
     assert np.array_equal(in_memory.points, on_disk.points)
     assert in_memory.summary["clouds_used"] == on_disk.summary["clouds_used"] > 0
+
+
+def test_a_killed_runs_spill_is_removed_by_the_next(tmp_path: Path, monkeypatch) -> None:
+    """SIGKILL during map-cloud left bagtools-held-* (7 MB) behind for good; the next spilling run removes the
+    directories whose process is gone, and only those."""
+    import subprocess
+    import sys
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    orphan = tmp_path / f"{HELD_PREFIX}{int(dead.stdout)}-abc"
+    orphan.mkdir()
+    (orphan / "000000.pickle").write_bytes(b"x" * 1000)
+    mine = tmp_path / f"{HELD_PREFIX}{__import__('os').getpid()}-def"
+    mine.mkdir()
+    held = HeldClouds(budget_bytes=100)
+    held.add(HeldCloud(0, 1, "cam", MapCloud(np.zeros((50, 3), np.float32))))
+    assert held.spilled_batches == 1 and not orphan.exists() and mine.exists()
+    held.close()
+
+
+def test_a_full_temporary_directory_is_named(tmp_path: Path, monkeypatch) -> None:
+    """It was said as 'No space left on device' naming the bag."""
+    import errno
+
+    import pytest
+
+    from bagtools.errors import BagtoolsError
+
+    held = HeldClouds(budget_bytes=100)
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "open", full)
+    with pytest.raises(BagtoolsError, match="cannot hold clouds there while tf is read") as info:
+        held.add(HeldCloud(0, 1, "cam", MapCloud(np.zeros((50, 3), np.float32))))
+    assert info.value.path is not None and HELD_PREFIX in info.value.path  # the temporary directory, not the bag
+    held.close()
