@@ -74,11 +74,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
 from bagtools.scan_matching.grid import CELL_MODELS
-from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.transforms import wrap_to_pi
+# single poses in the loop body, tens of calls per scan: without numpy's per-call overhead on 3-vectors
+from bagtools.transforms.planar import se2_between_fast as _between
+from bagtools.transforms.planar import se2_compose_fast as _compose
 
 GUESSES = ("odom", "constant-velocity", "zero")
 
@@ -797,17 +800,3 @@ def _voxel_filter(points: np.ndarray, voxel_m: float) -> np.ndarray:
     np.add.at(sums, voxel.reshape(-1), points)
     return sums / counts[:, None]
 
-
-# Single planar poses [x, y, theta] in the loop body: the same as bagtools.transforms' se2_between and se2_compose
-# (which the tests compare them with), without numpy's per-call overhead on 3-vectors (tens of calls per scan).
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a then b (b in a's frame), theta not wrapped."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
-
-
-def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """b in a's frame, theta wrapped to [-pi, pi)."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, (b[2] - a[2] + math.pi) % (2 * math.pi) - math.pi])

@@ -172,20 +172,6 @@ def test_csail_without_odometry_does_not_diverge(csail_scans_run) -> None:
     assert np.count_nonzero(trans > 0.2) <= 3
 
 
-def test_fast_planar_helpers_equal_the_transforms_module() -> None:
-    from bagtools.odometry.frontend import _between, _compose
-    from bagtools.transforms import se2_between as between
-    from bagtools.transforms import se2_compose as compose
-
-    rng = np.random.default_rng(3)
-    for _ in range(50):
-        a, b = rng.uniform(-4, 4, 3), rng.uniform(-4, 4, 3)
-        np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
-        d1, d2 = _between(a, b), between(a, b)
-        np.testing.assert_allclose(d1[:2], d2[:2], atol=1e-12)
-        assert abs((d1[2] - d2[2] + np.pi) % (2 * np.pi) - np.pi) < 1e-12
-
-
 def test_a_wheeled_robot_does_not_step_sideways() -> None:
     """The kinematic prior's arc term: a step along the arc costs nothing sideways, a sideways jump costs much."""
     from bagtools.odometry.frontend import _Prior

@@ -65,3 +65,18 @@ def test_single_and_stack_shapes(rng: np.random.Generator) -> None:
         assert func(stack).shape == (4, *out_item), func.__name__
         assert func(stack[2]).shape == out_item, func.__name__
         np.testing.assert_allclose(func(stack[2]), func(stack)[2], atol=1e-15, err_msg=func.__name__)
+
+
+def test_fast_planar_helpers_equal_the_transforms_module() -> None:
+    from bagtools.transforms.planar import se2_between_fast as _between
+    from bagtools.transforms.planar import se2_compose_fast as _compose
+    from bagtools.transforms import se2_between as between
+    from bagtools.transforms import se2_compose as compose
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        a, b = rng.uniform(-4, 4, 3), rng.uniform(-4, 4, 3)
+        np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
+        d1, d2 = _between(a, b), between(a, b)
+        np.testing.assert_allclose(d1[:2], d2[:2], atol=1e-12)
+        assert abs((d1[2] - d2[2] + np.pi) % (2 * np.pi) - np.pi) < 1e-12
