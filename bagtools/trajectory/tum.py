@@ -6,6 +6,7 @@ trajectory is int-nanosecond stamps and 4x4 poses ``T_frame_body``.
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,36 +106,48 @@ def read_tum(path: str | Path) -> Trajectory:
         text_lines = path.read_text(encoding="utf-8").splitlines()
     except (UnicodeDecodeError, OSError) as err:
         raise BagtoolsError(f"not a TUM text file ({err.__class__.__name__})", path) from err
-    stamps: list[int] = []
-    rows: list[list[float]] = []
+    stamps: array[int] = array("q")
+    flat: array[float] = array("d")  # x y z qx qy qz qw of each pose, one after another
+    numbers: array[int] = array("q")  # each pose's line number, for the messages
     for number, line in enumerate(text_lines, start=1):
-        text = line.split("#", 1)[0].strip()
-        if not text:
+        if "#" in line:
+            line = line.split("#", 1)[0]
+        fields = (line.replace(",", " ") if "," in line else line).split()
+        if not fields:
             continue
-        fields = text.replace(",", " ").split()
         if len(fields) != 8:
             raise BagtoolsError(f"line {number}: expected 8 values 'stamp x y z qx qy qz qw', got {len(fields)}", path)
         try:
             stamps.append(_stamp_ns(fields[0]))
-            rows.append([float(v) for v in fields[1:]])
-        except ValueError as err:
+            flat.extend(map(float, fields[1:]))
+        except (ValueError, OverflowError) as err:
             raise BagtoolsError(f"line {number}: not a number ({err})", path) from err
-        if not all(np.isfinite(rows[-1])) or max(abs(v) for v in rows[-1][:3]) > MAX_TUM_COORDINATE_M:
-            raise BagtoolsError(f"line {number}: values must be finite, positions within {MAX_TUM_COORDINATE_M:g} m "
-                                f"(got {' '.join(fields[1:])})", path)
-        if stamps[-1] > MAX_TUM_STAMP_NS:
-            raise BagtoolsError(f"line {number}: stamp {fields[0]} s is past the year 2286 (not a clock)", path)
-        if len(stamps) > 1 and stamps[-1] <= stamps[-2]:
-            raise BagtoolsError(f"line {number}: stamp {fields[0]} s is not after the previous one (time going "
-                                "backwards or repeated)", path)
-    if not rows:
+        numbers.append(number)
+    del text_lines
+    if not stamps:
         raise BagtoolsError("trajectory file holds no poses", path)
-    values = np.array(rows)
+    values = np.frombuffer(flat, dtype=np.float64).reshape(-1, 7)
+    stamps_ns = np.frombuffer(stamps, dtype=np.int64)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(values).all(axis=1) | (np.abs(values[:, :3]) > MAX_TUM_COORDINATE_M).any(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise BagtoolsError(f"line {numbers[k]}: values must be finite, positions within {MAX_TUM_COORDINATE_M:g} m "
+                            f"(got {' '.join(f'{v:g}' for v in values[k])})", path)
+    late = np.flatnonzero(stamps_ns > MAX_TUM_STAMP_NS)
+    if late.size:
+        raise BagtoolsError(f"line {numbers[late[0]]}: stamp {stamps_ns[late[0]] / 1e9:.9f} s is past the year 2286 "
+                            "(not a clock)", path)
+    back = np.flatnonzero(np.diff(stamps_ns) <= 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise BagtoolsError(f"line {numbers[k]}: stamp {stamps_ns[k] / 1e9:.9f} s is not after the previous one (time "
+                            "going backwards or repeated)", path)
     norms = np.linalg.norm(values[:, 3:], axis=1)
     if np.any(np.abs(norms - 1.0) > 1e-3):
-        bad = int(np.flatnonzero(np.abs(norms - 1.0) > 1e-3)[0])
-        raise BagtoolsError(f"pose {bad + 1} has a quaternion of norm {norms[bad]:.4f}, not 1", path)
-    return Trajectory.from_xyz_xyzw(np.array(stamps, dtype=np.int64), values[:, :3], values[:, 3:])
+        bad_pose = int(np.flatnonzero(np.abs(norms - 1.0) > 1e-3)[0])
+        raise BagtoolsError(f"pose {bad_pose + 1} has a quaternion of norm {norms[bad_pose]:.4f}, not 1", path)
+    return Trajectory.from_xyz_xyzw(stamps_ns.copy(), values[:, :3], values[:, 3:])
 
 
 def _stamp_ns(text: str) -> int:
