@@ -57,10 +57,25 @@ def _base_frame(result: SlamResult) -> str | None:
     return (front.summary.get("base_frame") or None) if front is not None else None
 
 
+def map_to_odom(result: SlamResult) -> tuple[str, np.ndarray, np.ndarray] | None:
+    """(the bag's odometry frame, stamps (N,), T_slam_odom (N,4,4)): REP 105's map -> odom correction at each scan,
+    T_slam_base T_odom_base^-1, which hangs the bag's own tree under the SLAM map; None when the run used no wheel
+    odometry or the bag's odometry frame already has a parent (a localizer's map), which keeps its own tree."""
+    front = result.front_end
+    wheels = front.odometry if front is not None else None
+    odom_frame = front.summary.get("odometry_frame") if front is not None else None
+    if wheels is None or not odom_frame or front.summary.get("odometry_frame_parent"):
+        return None
+    if not np.array_equal(wheels.stamps_ns, result.trajectory.stamps_ns):
+        return None
+    return odom_frame, wheels.stamps_ns, result.trajectory.poses @ np.linalg.inv(wheels.poses)
+
+
 def write_slam_results(bag: ResultsBag, result: SlamResult) -> None:
     """In the map frame: /map, /trajectory (optimized), /odometry (the laser odometry) and /ground_truth as paths,
     /tf (map -> base at each scan) and /tf_static (base -> laser), the scans at their stamps, and the accepted loop
-    closures as a MarkerArray of line segments between their keyframes."""
+    closures as a MarkerArray of line segments between their keyframes. When the bag's odometry frame has no parent,
+    /tf also carries slam_map -> odom (:func:`map_to_odom`): played beside the bag, one tree."""
     bag.occupancy_grid(result.grid, SLAM_FRAME)
     for topic, traj in (("/trajectory", result.trajectory), ("/odometry", result.odometry),
                         ("/ground_truth", result.ground_truth)):
@@ -73,6 +88,9 @@ def write_slam_results(bag: ResultsBag, result: SlamResult) -> None:
     scan_frame = front.summary.get("scan_frame")
     bag.robot(SLAM_FRAME, base, result.trajectory.stamps_ns, result.trajectory.poses,
               {scan_frame: front.T_base_scan} if scan_frame and scan_frame != base else {})
+    ties = map_to_odom(result)
+    if ties is not None:
+        bag.tf(SLAM_FRAME, *ties)
     if front.scans:
         bag.scans(front.summary.get("topic", "/scan"), front.scans)
     if len(result.loop_segments):

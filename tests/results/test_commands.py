@@ -152,3 +152,30 @@ def test_results_beside_their_bag_give_no_frame_two_parents(command: str, tmp_pa
                 parents.setdefault(ts.child_frame_id, set()).add(ts.header.frame_id)
     assert {f for f in parents if f.startswith(f"{command.replace('-', '_')}/")}, parents  # the results' own frames
     assert {f: p for f, p in parents.items() if len(p) > 1} == {}
+
+
+def test_slam_results_hang_the_bags_odom_under_the_slam_map(tmp_path: Path, real_dir: Path) -> None:
+    """The CSAIL bag's tf is odom -> base_link with odom a root: slam_map -> odom at each scan joins the two trees
+    (before, slam/base_link hung under slam_map, which nothing tied to the bag's odom)."""
+    from rosbags.highlevel import AnyReader
+
+    bag = real_dir / "csail_odom"
+    out = tmp_path / "slam"
+    done = subprocess.run([sys.executable, "-m", "bagtools", "slam", str(bag), "--out", str(out)], capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    parents: dict[str, set[str]] = {}
+    stamps = []
+    for path in (bag, out / "results.mcap"):
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]
+            for conn, _, raw in reader.messages(connections=conns):
+                for t in reader.deserialize(raw, conn.msgtype).transforms:
+                    parents.setdefault(t.child_frame_id, set()).add(t.header.frame_id)
+                    if t.child_frame_id == "odom":
+                        stamps.append(t.header.stamp.sec * 10**9 + t.header.stamp.nanosec)
+    assert all(len(p) == 1 for p in parents.values()), parents
+    assert parents["odom"] == {"slam_map"} and parents["slam/base_link"] == {"slam_map"}
+    roots = {p for ps in parents.values() for p in ps} - set(parents)
+    assert roots == {"slam_map"}  # one tree
+    assert len(stamps) == 406  # at each scan
