@@ -90,6 +90,16 @@ class LocalizeResult:
     scan_frame: str = ""
     T_base_scan: np.ndarray = field(default_factory=lambda: np.eye(4))
     scans: list = field(default_factory=list)
+    odom_frame: str = "odom"
+    odom_parent: str | None = None  # the odometry frame's parent in the bag's tf (a localizer's map), or None
+
+    def map_to_odom_tf(self) -> tuple[str, Trajectory] | None:
+        """(the bag's odometry frame, map -> odom at each localized scan) for results.mcap: the correction that hangs
+        the bag's own tree under the map, when the run used odometry and the bag's odometry frame has no parent
+        (else the result keeps its own tree); None otherwise."""
+        if self.map_to_odom is None or self.odom_parent is not None or self.odom_frame in ("", MAP_FRAME):
+            return None
+        return self.odom_frame, self.map_to_odom
 
 
 class LocalizePipeline:
@@ -137,7 +147,7 @@ class LocalizePipeline:
             map_to_odom = Trajectory(stamps[known], trajectory.poses @ np.linalg.inv(T_odom_base))
         result = LocalizeResult(nav2_map, stamps, poses, scores, states, events, trajectory, map_to_odom, own, truth,
                                 {}, dataset.base_frame or dataset.scan_frame, dataset.scan_frame, inputs.T_base_scan,
-                                dataset.scans)
+                                dataset.scans, dataset.odom_frame, dataset.odometry_frame_parent())
         result.summary = self._summary(result, localizer, elapsed_s)
         return result
 

@@ -102,7 +102,8 @@ def render_comparison_png(result: LocalizeResult) -> bytes:
 
 def write_localize_results(bag: ResultsBag, result: LocalizeResult) -> None:
     """In the map frame: /map, /trajectory, /bag_localizer and /ground_truth as paths, /tf (map -> base at each
-    localized scan) with the laser on the base, the scans at their stamps, and the events as markers."""
+    localized scan) with the laser on the base, the scans at their stamps, and the events as markers. When the bag's
+    odometry frame has no parent, /tf also carries map -> odom (:meth:`LocalizeResult.map_to_odom_tf`)."""
     bag.occupancy_grid(map_grid(result.nav2_map), MAP_FRAME)
     for topic, traj in (("/trajectory", result.trajectory), ("/bag_localizer", result.bag_localizer),
                         ("/ground_truth", result.ground_truth)):
@@ -111,6 +112,10 @@ def write_localize_results(bag: ResultsBag, result: LocalizeResult) -> None:
     if len(result.trajectory):
         sensors = {result.scan_frame: result.T_base_scan} if result.scan_frame and result.scan_frame != result.base_frame else {}
         bag.robot(MAP_FRAME, result.base_frame, result.trajectory.stamps_ns, result.trajectory.poses, sensors)
+    ties = result.map_to_odom_tf()
+    if ties is not None:
+        odom_frame, map_to_odom = ties
+        bag.tf(MAP_FRAME, odom_frame, map_to_odom.stamps_ns, map_to_odom.poses)
     if result.scans:
         bag.scans(result.summary.get("topic", "/scan"), result.scans)
     for kind, rgba in (("lost", (1.0, 0.1, 0.1, 1.0)), ("recovered", (1.0, 0.6, 0.0, 1.0)), ("fix", (0.1, 0.8, 0.1, 1.0)),

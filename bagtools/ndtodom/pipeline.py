@@ -397,11 +397,12 @@ class NdtOdomPipeline:
             root = frame = parent
         return root
 
-    def _parent_of(self, frame: str) -> str | None:
-        """The parent of ``frame`` in the bag's tf (a localizer's map above odom), or None (a root, or no tf)."""
-        if self.buffer is None or not self.buffer.has_frame(frame):
+    def odometry_frame_parent(self) -> str | None:
+        """The parent of the odometry frame in the bag's tf (a localizer's map above odom), or None (a root, no
+        tf)."""
+        if self.buffer is None or not self.buffer.has_frame(self.odom_frame):
             return None
-        return self.buffer.parent(frame)
+        return self.buffer.parent(self.odom_frame)
 
     def _has_odometry(self) -> bool:
         return self.odometry_source is not None
@@ -539,7 +540,7 @@ class NdtOdomPipeline:
             "topic": self.options.topic,
             "scan_frame": self.scan_frame,
             "odometry_frame": self.odom_frame,
-            "odometry_frame_parent": self._parent_of(self.odom_frame),
+            "odometry_frame_parent": self.odometry_frame_parent(),
             "base_frame": self.base_frame or self.scan_frame,
             "odometry_source": self.odometry_source,
             "T_base_scan_xyz_yaw": [*map(float, self.T_base_scan[:3, 3]), float(tform2pose(self.T_base_scan)[2])],

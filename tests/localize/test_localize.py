@@ -186,6 +186,10 @@ def test_a_bag_with_only_amcl_pose_has_its_localizer_compared_through_it(world: 
     assert common.size > 250 and np.median(apart) < 1e-6 and apart.max() < 0.3, (np.median(apart), apart.max())
     assert abs(compared["translation_m"]["mean"] - with_tf.summary["bag_localizer"]["translation_m"]["mean"]) < 0.01
     assert result.summary["ground_truth"]["bag_localizer"]["ape_m"]["rmse"] < 0.1
+    # results.mcap's tree: the bag's own map -> odom keeps ours apart; without it, map -> odom ties the bag's robot in
+    assert with_tf.map_to_odom_tf() is None
+    odom_frame, map_to_odom = result.map_to_odom_tf()
+    assert odom_frame == "odom" and len(map_to_odom) == len(result.trajectory)
 
 
 def test_amcl_pose_in_another_frame_is_said(world: dict, tmp_path: Path) -> None:
