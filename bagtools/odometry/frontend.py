@@ -9,7 +9,11 @@ scan, in the robot base frame:
    ``VELOCITY_SPAN_S`` or more, whose stamps a jittering clock cannot throw
    off as it does one step's, scaled to the time step, never beyond what the
    robot can do in it: ``max_speed_mps``, ``max_turn_rate_radps``), and no
-   motion.
+   motion. A robot keeps a speed for about ``MOTION_MEMORY_S``: a longer step
+   (a log that writes a scan per metre, a pause, a gap) is taken as that long
+   at the recent speed, and the speed of a longer span as its distance over
+   that time, so that a wait of minutes predicts neither minutes of travel nor
+   none.
 2. **NDT** from the first guess (odometry if there is one) against the current
    keyframe. The other guesses are tried too when they lie outside that
    result's basin; results that disagree mean several minima.
@@ -22,19 +26,29 @@ scan, in the robot base frame:
    scores poorly, the window of what the robot can have done is searched:
    with odometry, its best match on the submap; without, every distinct
    correlative peak (:func:`~bagtools.scan_matching.match_scans_grid_peaks`) on a larger
-   submap, since a scene that repeats (a parallel corridor, the mirror image of
-   a junction after a sharp turn) can match a small submap better than the
+   submap, and the prior's own place at headings across what the robot can
+   turn on the way there (``CV_TURN_PER_M`` per metre, two sigmas: a metre is
+   enough to turn into a side corridor, and a scan that turns into new walls
+   scores low on the correlative field while NDT from near it finds it),
+   since a scene that repeats (a parallel corridor, the mirror image of a
+   junction after a sharp turn) can match a small submap better than the
    place itself; without odometry, a time step longer than ``max_gap_s``
    searches that window too (constant velocity says little after seconds).
    The best normalized NDT score, less the prior's cost (the motion model:
    speed, arcs, and never beyond max speed and turn rate), wins, unless a
-   match in another place comes within ``CONTEST_MARGIN`` of it: then each is
+   match in another place comes within ``CONTEST_MARGIN`` of it (or at all,
+   when the scans lie so far apart that the wide search starts at several
+   headings: then much of each scan sees walls no keyframe saw, and the
+   voxel-filtered score that shortlists, which weighs far returns most, cannot
+   rank places): then each is
    scored on the submap as a fine likelihood field (``match_scans_grid`` at
    ``FINE_SCORE_RESOLUTION_M``), less what the robot's reach makes of it, and
    a margin of ``AMBIGUOUS_MARGIN`` on that score decides. Without odometry, a
    scan whose stamp is suspect (a step under ``SHORT_STEP_RATIO`` of the usual
    one, or the step after it) and that matches nothing well within reach is
    searched in the largest window with no reach (counted as ``beyond_reach``).
+   A scan of fewer than ``MIN_WIDE_POINTS`` points is never searched wide: a
+   dozen returns fit somewhere in any large window.
    A scan stamped before the scan registered before it (the log stamped it out
    of the order it was recorded in, which the scans arrive in) has a stamp
    that says nothing of when it was taken: it is taken as the next scan of its
@@ -102,6 +116,9 @@ AMBIGUOUS_WARN_SHARE = 0.03
 #: part: the narrow part's preference already shortlisted them). Coarse NDT cells blur what tells a sharp turn or
 #: a half-seen room or a corridor's doors from a look-alike; a fine grid does not.
 CONTEST_MARGIN = 0.1
+#: How much a robot's heading may change per metre travelled (rad/m, one sigma) beyond constant velocity's turn: the
+#: wide search starts NDT at headings across it (a robot turns into a side corridor within a metre).
+CV_TURN_PER_M = 0.3
 FINE_SCORE_RESOLUTION_M = 0.05
 FINE_SCORE_WINDOW = (0.1, 0.1, 0.02)
 #: Added to an ambiguous step's covariance (m^2, m^2, rad^2): the other place may be the right one, and a pose
@@ -139,6 +156,14 @@ STAMP_JITTER_S = 0.25
 #: Constant velocity is the motion over at least this much time (s): over one step, a stamp off by STAMP_JITTER_S
 #: would make it anything.
 VELOCITY_SPAN_S = 0.5
+#: A robot keeps a speed for about this long (s): over a longer step it may have stopped, waited and gone on (a log
+#: that writes a scan per metre, a pause), so the motion of such a step is taken as MOTION_MEMORY_S of travel at the
+#: recent speed, and a step of d metres over a longer span as d metres in MOTION_MEMORY_S (a speed, not an average
+#: over the waits).
+MOTION_MEMORY_S = 2.0
+#: A scan of fewer points (voxel-filtered) is not searched beyond the prior's window: a dozen returns fit somewhere in
+#: any large window as well as at the place, and could not overrule the motion model.
+MIN_WIDE_POINTS = 20
 #: Keyframes of the submap lie within this distance of the newest one (m).
 SUBMAP_RADIUS_M = 10.0
 #: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
@@ -421,7 +446,7 @@ class LaserOdometry:
                 matches.append(searched)
                 best = max(matches, key=prior.objective)
             gap = dt > opts.max_gap_s and prior.kind != "odometry"
-            if (best.score < self._trust_score() or gap) and prior.wide is not None:
+            if (best.score < self._trust_score() or gap) and prior.wide is not None and len(points) >= MIN_WIDE_POINTS:
                 # The guess may be what is wrong: search what the robot can have done instead.
                 if prior.kind == "odometry":  # rarely wrong: its best alternative on the submap is enough
                     searched = self._search(points, kf, prior.wide, dt)
@@ -474,7 +499,7 @@ class LaserOdometry:
     def _guesses(self, last_pose: np.ndarray, dt: float, odom: np.ndarray | None) -> dict[str, np.ndarray]:
         """Absolute pose guesses, the first one to try first."""
         opts = self.options
-        cv = self._velocity * dt
+        cv = self._velocity * min(dt, MOTION_MEMORY_S)
         cv[:2] *= min(1.0, opts.max_speed_mps * dt / max(float(np.hypot(cv[0], cv[1])), 1e-12))
         cv[2] = float(np.clip(cv[2], -opts.max_turn_rate_radps * dt, opts.max_turn_rate_radps * dt))
         guesses: dict[str, np.ndarray] = {}
@@ -545,12 +570,13 @@ class LaserOdometry:
         rivals = [m for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
         if not rivals:
             return best, False
+        margin = math.inf if self._turn_starts() else CONTEST_MARGIN
         runner_up = max(prior.objective(m) for m in rivals)
-        if prior.objective(best) - runner_up >= CONTEST_MARGIN:
+        if prior.objective(best) - runner_up >= margin:
             return best, False
         contenders = [best]
         for m in sorted(rivals, key=prior.objective, reverse=True):
-            if prior.objective(best) - prior.objective(m) < CONTEST_MARGIN and \
+            if prior.objective(best) - prior.objective(m) < margin and \
                     not any(_close(m.pose, c.pose, BASIN_M, BASIN_RAD) for c in contenders):
                 contenders.append(m)
         reach = prior.wide or prior  # what the robot can have done; the prior's preference shortlisted them
@@ -558,7 +584,11 @@ class LaserOdometry:
         order = np.argsort(fine)[::-1]
         if fine[order[0]] - fine[order[1]] < AMBIGUOUS_MARGIN:  # the finer grid cannot tell them apart either
             return best, True
-        return contenders[order[0]], False
+        winner = contenders[order[0]]
+        if winner is best:
+            return best, False
+        # the whole scan's fine field vouches for it, where its voxel-filtered score may not (far returns on new walls)
+        return _Match(winner.pose, max(winner.score, fine[order[0]]), winner.covariance, winner.source), False
 
     def _fine_score(self, points: np.ndarray, kf: _Keyframe, pose: np.ndarray) -> float:
         """The best likelihood-field score (in [0, 1]) of ``points`` on the keyframe's submap at
@@ -623,6 +653,11 @@ class LaserOdometry:
                                        max_peaks=WIDE_PEAKS, min_ratio=WIDE_PEAK_RATIO)
         starts = [(m.pose, m.source) for m in matches] + [(np.asarray(p.pose, dtype=np.float64), "search")
                                                           for p in peaks]
+        # The prior's own place at headings across what the robot can turn on the way (CV_TURN_PER_M per metre, two
+        # sigmas): a turn whose scan sees new walls scores low on the correlative field, yet NDT from near it finds it.
+        n_turns = self._turn_starts()
+        starts += [(prior.mean + np.array([0.0, 0.0, 2.0 * BASIN_RAD * k]), "prior")
+                   for k in range(-n_turns, n_turns + 1) if k != 0]  # k = 0: the guesses' NDT is in matches
         refined: list[_Match] = []
         for initial, source in starts:
             if any(_close(initial, m.pose, AGREE_M, AGREE_RAD) for m in refined):
@@ -631,6 +666,15 @@ class LaserOdometry:
                 continue
             refined.append(self._ndt(points, ndt, initial, source, prior))
         return refined
+
+    def _turn_starts(self) -> int:
+        """How many headings on each side of the prior the wide search starts NDT at (BASIN_RAD x 2 apart): across
+        two sigmas of the turn the robot can make over the recent scans' spacing (the median length of the last
+        steps, CV_TURN_PER_M per metre). None when the scans are close (dense logs): NDT's basin covers the turn."""
+        steps = self.run.steps[-6:]
+        lengths = [math.hypot(*_between(a.pose, b.pose)[:2]) for a, b in zip(steps, steps[1:])]
+        spacing = float(np.median(lengths)) if lengths else 0.0
+        return int(min(2.0 * CV_TURN_PER_M * spacing, math.pi) / (2.0 * BASIN_RAD) + 1e-9)
 
     def _mean_velocity(self, pose: np.ndarray, last: np.ndarray) -> np.ndarray:
         """The velocity (per second) from the most recent matched step at least VELOCITY_SPAN_S back (or the oldest
@@ -643,7 +687,7 @@ class LaserOdometry:
                 start_s, start = t, p
                 break
         self._recent.append((self._clock_s, pose))
-        span = max(self._clock_s - start_s, 1e-3)
+        span = min(max(self._clock_s - start_s, 1e-3), MOTION_MEMORY_S)
         d = _between(start, pose)
         turn = 0.5 * (_between(last, pose)[2] - d[2])
         c, s = math.cos(turn), math.sin(turn)

@@ -275,3 +275,32 @@ def test_csail_half_the_scans_without_odometry_warns_of_ambiguous_matches(csail_
     assert counts["ambiguous"] >= 0.05 * counts["pairs"], counts
     assert any(f"{counts['ambiguous']} of {counts['pairs']} scan pairs on the scans matched two places almost equally "
                "well" in w for w in front.warnings()), front.warnings()
+
+
+def test_a_wait_of_minutes_predicts_seconds_of_travel_not_minutes() -> None:
+    """Constant velocity over a 112 s step (a log that writes a scan per metre, a pause): MOTION_MEMORY_S of travel
+    at the recent speed, not 112 s of it (FHW went 63 m the wrong way); a dense log's 0.2 s step is unchanged."""
+    from bagtools.odometry.frontend import MOTION_MEMORY_S
+
+    odometry = LaserOdometry()
+    odometry._velocity = np.array([0.5, 0.0, 0.1])
+    long = odometry._guesses(np.zeros(3), 112.0, None)["constant-velocity"]
+    assert np.allclose(long, [0.5 * MOTION_MEMORY_S * np.cos(0.0), *long[1:2], 0.1 * MOTION_MEMORY_S], atol=0.05)
+    short = odometry._guesses(np.zeros(3), 0.2, None)["constant-velocity"]
+    assert np.allclose(short, [0.1, 0.0, 0.02])
+
+
+def test_turns_are_searched_only_where_scans_lie_far_apart() -> None:
+    """Scans a metre apart (a robot turns into a side corridor within one): the wide search starts at several
+    headings; scans 10 cm apart (every dense log): none, NDT's basin covers the turn."""
+    from bagtools.odometry.steps import ScanStep
+
+    def spaced(step_m: float) -> LaserOdometry:
+        odometry = LaserOdometry()
+        for k in range(6):
+            odometry.run.steps.append(ScanStep(k, np.array([k * step_m, 0.0, 0.0]), np.zeros((0, 2)), k - 1,
+                                               np.zeros(3), np.eye(3), 1.0, "ndt", True))
+        return odometry
+
+    assert spaced(1.0)._turn_starts() == 3  # +-0.2, 0.4, 0.6 rad: two sigmas of 0.3 rad per metre
+    assert spaced(0.1)._turn_starts() == 0

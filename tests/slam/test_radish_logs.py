@@ -1,0 +1,86 @@
+"""``bagtools slam`` on real logs it was not tuned on (``../shared/data/radish``; skipped when absent).
+
+Radish logs hold a scan about every metre of travel, 0.1 to 230 s apart: the
+motion between scans is metres and tens of degrees, and the time step says
+little of it. Scans only (the poses on their laser lines are a SLAM system's
+answer), scored by the aligned APE against those corrected poses, as the
+data's README says. Targets of issue #40: RMSE at most 0.2 m, max at most 0.75 m.
+"""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagtools.slam import SlamOptions, SlamPipeline
+from bagtools.slam.evaluate import align_se2
+from bagtools.trajectory import read_tum
+from tests.conftest import REPO
+
+RADISH_DIR = REPO.parent / "shared" / "data" / "radish"
+
+
+def _log(name: str) -> Path:
+    path = RADISH_DIR / f"{name}.log.gz"
+    if not path.is_file():
+        pytest.skip(f"Radish logs not available: {path} does not exist")
+    return path
+
+
+def _aligned_ape(source: Path, reference: Path) -> tuple[float, float]:
+    """slam of ``source``, scans only: (RMSE, max) of its SE(2)-aligned positions against ``reference``, paired in
+    logging order (one pose per scan)."""
+    trajectory = SlamPipeline(source, SlamOptions(use_odometry=False)).run().trajectory
+    est, ref = trajectory.positions[:, :2], read_tum(reference).positions[:, :2]
+    assert len(est) == len(ref), f"{len(est)} poses for {len(ref)} scans"
+    R, t = align_se2(est, ref)
+    error = np.linalg.norm(est @ R.T + t - ref, axis=1)
+    return float(np.sqrt(np.mean(error**2))), float(error.max())
+
+
+def _restamped(log: Path, out: Path) -> Path:
+    """``log``'s laser lines with their stamps rewritten 1 s apart in logging order."""
+    lines, k = [], 0
+    with gzip.open(log, "rt") as f:
+        for line in f:
+            words = line.split()
+            if words and words[0] == "FLASER":
+                words[-3] = words[-1] = f"{k:.6f}"
+                lines.append(" ".join(words))
+                k += 1
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+@pytest.mark.parametrize("name", ["seattle", "freiburg-101"])
+def test_a_scan_per_metre_as_distributed(name: str) -> None:
+    """Seattle's junction turns (a scan turned 90 degrees fits the crossing corridor too) and Freiburg 101's 20 s
+    gaps: each map is consistent to the targets (0.050 and 0.065 m; 5.2 and 2.4 m before the motion model)."""
+    rmse, worst = _aligned_ape(_log(name), RADISH_DIR / f"{name}.reference.tum")
+    assert rmse <= 0.2 and worst <= 0.75, (rmse, worst)
+
+
+def test_waits_of_minutes_between_scans() -> None:
+    """FHW: scans up to 230 s apart. A wait no longer predicts minutes of travel (it went 63 m the wrong way at a
+    112 s step): 0.16 m RMSE, 0.58 m max, against 21 m before."""
+    rmse, worst = _aligned_ape(_log("fhw"), RADISH_DIR / "fhw.reference.tum")
+    assert rmse <= 0.2 and worst <= 0.75, (rmse, worst)
+
+
+def test_steady_stamps_give_the_same_map(tmp_path: Path) -> None:
+    """The same scans stamped 1 s apart (what a log with unusable stamps becomes): the motion model works per
+    scan, and Seattle's loop still closes."""
+    source = _restamped(_log("seattle"), tmp_path / "seattle-steady.log")
+    rmse, worst = _aligned_ape(source, RADISH_DIR / "seattle.reference.tum")
+    assert rmse <= 0.2 and worst <= 0.75, (rmse, worst)
+
+
+def test_a_large_hall_is_not_yet_to_target() -> None:
+    """Edmonton: a convention centre whose scans often hold a dozen returns; even placed at the reference poses,
+    most of its loop candidates' local maps overlap too little to score the loop threshold (issue #40 open: 1.09 m
+    as distributed and 0.53 m with steady stamps, against 5.1 and 7.8 m before the motion model). Bounds what holds."""
+    rmse, worst = _aligned_ape(_log("edmonton"), RADISH_DIR / "edmonton.reference.tum")
+    assert rmse <= 2.5 and worst <= 7.0, (rmse, worst)
