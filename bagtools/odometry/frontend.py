@@ -37,10 +37,10 @@ scan, in the robot base frame:
    The best normalized NDT score, less the prior's cost (the motion model:
    speed, arcs, and never beyond max speed and turn rate), wins, unless a
    match in another place comes within ``CONTEST_MARGIN`` of it (or at all,
-   when the scans lie so far apart that the wide search starts at several
-   headings: then much of each scan sees walls no keyframe saw, and the
-   voxel-filtered score that shortlists, which weighs far returns most, cannot
-   rank places): then each is
+   without odometry, when the scans lie so far apart that the wide search
+   starts at several headings: then much of each scan sees walls no keyframe
+   saw, and the voxel-filtered score that shortlists, which weighs far returns
+   most, cannot rank places): then each is
    scored on the submap as a fine likelihood field (``match_scans_grid`` at
    ``FINE_SCORE_RESOLUTION_M``), less what the robot's reach makes of it, and
    a margin of ``AMBIGUOUS_MARGIN`` on that score decides. Without odometry, a
@@ -570,7 +570,8 @@ class LaserOdometry:
         rivals = [m for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
         if not rivals:
             return best, False
-        margin = math.inf if self._turn_starts() else CONTEST_MARGIN
+        # far-apart scans without odometry: the shortlist's score cannot rank places (with odometry, its prior does)
+        margin = math.inf if prior.kind != "odometry" and self._turn_starts() else CONTEST_MARGIN
         runner_up = max(prior.objective(m) for m in rivals)
         if prior.objective(best) - runner_up >= margin:
             return best, False
