@@ -359,7 +359,7 @@ def render_map_png(
     ax = fig.add_subplot(1, 1, 1)
     # grey bytes, pooled to about the picture's resolution: no colour mapping of millions of float cells
     grey, _ = grey_pixels(grid.occupancy_matrix("probability"), MAX_PICTURE_PX)
-    ax.imshow(np.repeat(grey[:, :, None], 3, axis=2), origin="upper", extent=(x0, x1, y0, y1),
+    ax.imshow(rgba_pixels(grey), origin="upper", extent=(x0, x1, y0, y1),
               interpolation="nearest")
     if trajectory_xy is not None:
         traj = _trajectory(trajectory_xy)
@@ -398,6 +398,15 @@ def grey_pixels(probability: np.ndarray, max_px: int) -> tuple[np.ndarray, int]:
             view = grey[:part.shape[0], :part.shape[1]]
             np.minimum(view, part, out=view)
     return grey, k
+
+
+def rgba_pixels(grey: np.ndarray) -> np.ndarray:
+    """Opaque RGBA bytes (R, C, 4) of grey pixels (R, C) uint8: what matplotlib's imshow draws without converting
+    (an RGB or a colour-mapped array is first converted at full size)."""
+    rgba = np.empty(grey.shape + (4,), dtype=np.uint8)
+    rgba[..., :3] = grey[..., None]
+    rgba[..., 3] = 255
+    return rgba
 
 
 def _trajectory(trajectory_xy: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ indices, so all translations of one angle are gathers from the same raster.
 
 The search is the multi-resolution branch and bound of W. Hess et al., "Real-time
 loop closure in 2D LIDAR SLAM", ICRA 2016: level k of a precomputed stack of
-rasters (``scipy.ndimage.maximum_filter``) holds at each cell the maximum of
+rasters (each level the maximum of two blocks of the level below, in x then in y) holds at each cell the maximum of
 the raster over the 2^k x 2^k cells above and to the right of it, so scoring a
 node (an angle and a 2^k x 2^k block of translations) at level k bounds the
 score of every candidate in it from above. The roots are the blocks of the
@@ -54,7 +54,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from bagtools.scan_matching.grid import finite_points
 from bagtools.scan_matching.matcher import MIN_SCAN_POINTS, ranges_to_points
@@ -90,6 +89,23 @@ class _Pyramid:
     pad_hi: tuple[int, int]  # zero cells added above
     shape: tuple[int, int]
     levels: np.ndarray  # ((depth + 1) * shape[0] * shape[1],) uint16; level k at k * P + ix * shape[1] + iy
+
+
+def _kernel_stamps(res: float, sigma: float, cutoff: float, ny: int) -> list[tuple[int, int]]:
+    """(flat raster offset, uint16 likelihood) of the cells within ``cutoff`` (m) of a cell, ascending by value.
+
+    The likelihood of a cell ``d`` metres from the nearest point is exp(-d^2 / 2 sigma^2), d measured between
+    cell centres as scipy's ``distance_transform_edt(sampling=res)`` does, scaled to ``RASTER_MAX`` and rounded.
+    """
+    r = int(math.floor(cutoff / res + 1e-9)) + 1
+    dx, dy = np.meshgrid(np.arange(-r, r + 1, dtype=np.float64), np.arange(-r, r + 1, dtype=np.float64),
+                         indexing="ij")
+    dist = np.sqrt((dx * res) ** 2 + (dy * res) ** 2)
+    keep = dist <= cutoff
+    values = np.rint(np.exp(-0.5 * (dist[keep] / sigma) ** 2) * RASTER_MAX).astype(np.uint16)
+    offsets = dx[keep].astype(np.intp) * ny + dy[keep].astype(np.intp)
+    order = np.argsort(values, kind="stable")
+    return [(int(offsets[k]), int(values[k])) for k in order]
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,13 +158,15 @@ class CorrelativeReference:
             raise ValueError(f"the reference raster would need {shape[0]:.0f} x {shape[1]:.0f} cells, above the limit of "
                              f"{MAX_RASTER_CELLS} (MAX_RASTER_CELLS): use a coarser resolution_m or a smaller reference")
         idx = (cells - lo).astype(np.intp)
-        free = np.ones(shape.astype(np.intp), dtype=bool)
-        free[idx[:, 0], idx[:, 1]] = False
-        dist = ndimage.distance_transform_edt(free, sampling=res)
-        likelihood = np.exp(-0.5 * (dist / sigma) ** 2)
-        likelihood[dist > cutoff] = 0.0
-        raster = np.rint(likelihood * RASTER_MAX).astype(np.uint16)
-        return cls(res, sigma, len(pts), lo * res, raster)
+        nx, ny = shape.astype(np.intp).tolist()
+        occupied = np.unique(idx[:, 0] * ny + idx[:, 1])
+        # Each occupied cell stamps the kernel around it (the margin keeps every stamp inside); a cell keeps the
+        # largest value, that of its nearest occupied cell: the raster of a Euclidean distance transform cut off
+        # at ``cutoff``, computed only where it is not zero (a few dozen offsets instead of every cell).
+        raster = np.zeros(nx * ny, dtype=np.uint16)
+        for flat_offset, value in _kernel_stamps(res, sigma, cutoff, ny):
+            raster[occupied + flat_offset] = value  # ascending values: the largest is written last
+        return cls(res, sigma, len(pts), lo * res, raster.reshape(nx, ny))
 
     def score(self, points_m: np.ndarray, pose: np.ndarray) -> float:
         """The score :func:`match_scans_grid` gives ``points_m`` ((N, 2), their own frame, m) at ``pose``
@@ -187,10 +205,13 @@ class CorrelativeReference:
         levels = np.zeros((depth + 1, nx, ny), dtype=np.uint16)
         levels[0, pad_lo[0]:pad_lo[0] + rx, pad_lo[1]:pad_lo[1] + ry] = self.raster
         for k in range(1, depth + 1):
-            size = 1 << k
-            # Window [i, i + size) in both axes: the maximum over the block above and to the right.
-            ndimage.maximum_filter(levels[0], size=size, origin=-(size // 2), mode="constant", cval=0,
-                                   output=levels[k])
+            # Window [i, i + 2^k) in both axes (the maximum over the block above and to the right; cells past the
+            # edge count 0): the two blocks of 2^(k-1) of the level below, in x, then in y.
+            half, below, level = 1 << (k - 1), levels[k - 1], levels[k]
+            level[:] = below
+            np.maximum(below[:-half], below[half:], out=level[:-half])
+            in_x = level.copy()
+            np.maximum(in_x[:, :-half], in_x[:, half:], out=level[:, :-half])
         built = _Pyramid(depth, (int(pad_lo[0]), int(pad_lo[1])), (int(pad_hi[0]), int(pad_hi[1])), (nx, ny),
                          levels.reshape(-1))
         self._pyramid[:] = [built]

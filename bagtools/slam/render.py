@@ -7,7 +7,7 @@ import io
 import numpy as np
 
 from bagtools.grid import OccupancyGrid
-from bagtools.grid.mapio import MAX_PICTURE_PX, grey_pixels
+from bagtools.grid.mapio import MAX_PICTURE_PX, grey_pixels, rgba_pixels
 
 #: Metres of map kept around the occupied cells and the trajectory in the picture.
 MARGIN_M = 2.0
@@ -60,7 +60,7 @@ def render_slam_map_png(grid: OccupancyGrid, trajectory_xy: np.ndarray, loop_seg
     del probability  # the full-size matrix is not needed while the figure is drawn
     (left, top), (right, bottom) = grid.grid2world(np.array([[r0, c0], [r1, c1]]))
     half = 0.5 * grid.cell_size_m
-    ax.imshow(np.repeat(grey[:, :, None], 3, axis=2), origin="upper", interpolation="nearest",
+    ax.imshow(rgba_pixels(grey), origin="upper", interpolation="nearest",
               extent=(left - half, right + half, bottom - half, top + half))
     segments = np.asarray(loop_segments, dtype=np.float64).reshape(-1, 2, 2)
     if len(segments):
