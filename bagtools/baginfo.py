@@ -12,11 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
+from bagtools.errors import BagError
 from bagtools.io import TfCollector, open_bag
 from bagtools.io.storage import StorageDetails, qos_text, storage_details
 from bagtools.progress import progress
 from bagtools.tf.frames import FrameInfo, frame_infos, render_tree
 from bagtools.tf.repair import tf_conflicts
+
+#: info decodes the first this many messages of each topic (beyond tf, which it reads whole): damaged data is said.
+DECODE_SAMPLE = 5
 
 
 @dataclass(frozen=True)
@@ -112,10 +116,19 @@ def describe_bag(path: str | Path) -> BagDescription:
         collector = TfCollector()
         collector.check(bag)
         times: dict[str, list[int]] = {name: [] for name in bag.topics}
+        undecodable: dict[str, list[str]] = {name: [] for name in bag.topics}  # problems of the sampled messages
         for raw in progress(bag.raw_messages(), total=bag.message_count, desc="reading"):
             times[raw.topic].append(raw.log_time_ns)
             if raw.topic in collector.topics:
                 collector.add(bag.deserialize(raw))
+            elif len(times[raw.topic]) <= DECODE_SAMPLE:  # are the topic's messages what their type says?
+                try:
+                    bag.deserialize(raw)
+                except BagError as err:
+                    undecodable[raw.topic].append(err.problem)
+        damaged = [f"{bag.path}: {name}: {len(problems)} of its first {min(DECODE_SAMPLE, len(times[name]))} messages "
+                   f"cannot be decoded (damaged data; commands skip such messages): {problems[0]}"
+                   for name, problems in undecodable.items() if problems]
         topics = []
         for name, info in bag.topics.items():
             stamps = np.asarray(times[name], dtype=np.int64)
@@ -125,7 +138,7 @@ def describe_bag(path: str | Path) -> BagDescription:
                                        int(stamps.min()) if stamps.size else 0, int(stamps.max()) if stamps.size else 0))
         dynamic, static = collector.arrays()
         return BagDescription(str(bag.path), bag.kind, bag.start_ns, bag.end_ns, sum(t.count for t in topics),
-                              topics, frame_infos(dynamic, static), list(bag.warnings) + tf_conflicts(dynamic, static),
+                              topics, frame_infos(dynamic, static), list(bag.warnings) + damaged + tf_conflicts(dynamic, static),
                               storage_details(bag))
 
 

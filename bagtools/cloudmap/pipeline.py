@@ -160,7 +160,8 @@ class CloudMapPipeline:
                 reasons = ", ".join(f"{n} {why}" for why, n in self.skipped.items()) or "no messages"
                 invalid = self.buffer.invalid_note(*sorted(self.buffer.invalid_dropped))
                 raise BagtoolsError(f"no cloud on {self.options.topic} could be placed in frame '{self.options.frame}' "
-                                    f"({reasons}), so there is no map to write{invalid}", bag.path)
+                                    f"({reasons}), so there is no map to write{invalid}"
+                                    f"{bag.decode_note(self.options.topic)}", bag.path)
             cloud = self.accumulator.cloud()
             points = cloud.points
             if points.shape[0] == 0:

@@ -196,7 +196,7 @@ class GridMapPipeline:
         self.skipped.update(self.scan_stream.skipped)
         self.scans_total += sum(self.scan_stream.skipped.values())
         if self.grid is None or self.scans_used == 0:
-            raise BagtoolsError(self._nothing_posed_message(), bag.path)
+            raise BagtoolsError(self._nothing_posed_message() + bag.decode_note(self.options.topic), bag.path)
         if self.returns_used == 0:
             raise BagtoolsError(
                 f"no scan on {self.options.topic} has a return within its range limits (all NaN, infinite or out of "

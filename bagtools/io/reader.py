@@ -358,6 +358,8 @@ class BagReader:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.warnings: list[str] = []
+        #: topic -> (messages skipped because they cannot be decoded, the first one's problem)
+        self.undecodable: dict[str, tuple[int, str]] = {}
         self.kind, self._source = self._open_source()
         self.topics: dict[str, TopicInfo] = dict(sorted(self._source.topics.items()))
         self.start_ns: int = int(self._source.start_ns)
@@ -542,6 +544,7 @@ class BagReader:
         None, the message is deserialized as usual.
         """
         failed: dict[str, int] = {}
+        first_by_topic: dict[str, str] = {}
         first_error = ""
         fast = {t: d for t, d in (from_cdr or {}).items() if t in self._source.cdr_topics}
         try:
@@ -555,10 +558,21 @@ class BagReader:
                 except BagError as err:
                     failed[rec.topic] = failed.get(rec.topic, 0) + 1
                     first_error = first_error or err.problem
+                    first_by_topic.setdefault(rec.topic, err.problem)
         finally:
+            for topic, n in failed.items():  # a topic read twice (a first pass for its stamps) counts once
+                self.undecodable[topic] = (max(n, self.undecodable.get(topic, (0, ""))[0]), first_by_topic[topic])
             if failed:
                 counts = ", ".join(f"{n} on {topic}" for topic, n in failed.items())
                 self._warn_once(f"{self.path}: skipped messages that cannot be decoded ({counts}; first: {first_error})")
+
+    def decode_note(self, topic: str) -> str:
+        """' (N of its messages cannot be decoded: PROBLEM)' when reading ``topic`` skipped damaged messages, else
+        '': for an error that says a topic held nothing usable, so that it says why."""
+        if topic not in self.undecodable:
+            return ""
+        n, problem = self.undecodable[topic]
+        return f" ({n} of its messages cannot be decoded, the bag is damaged: {problem})"
 
     def _warn_once(self, warning: str) -> None:
         if warning not in self.warnings:

@@ -160,7 +160,7 @@ class LocalizePipeline:
             scan_frame_offset=self.options.scan_frame_offset), keep_scans=self.keep_scans)
         inputs = dataset.read_inputs(bag)
         if len(inputs.stamps_ns) == 0:
-            raise BagtoolsError(dataset.no_scan_problem(), self.bag_path)
+            raise BagtoolsError(dataset.no_scan_problem(bag), self.bag_path)
         return dataset, inputs
 
     def _localize(self, nav2_map: Nav2Map, dataset: NdtOdomPipeline,

@@ -240,10 +240,11 @@ class NdtOdomPipeline:
         poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
         return front, poses
 
-    def no_scan_problem(self) -> str:
-        """Why there is no usable scan, in words (after :meth:`read_inputs` found none)."""
+    def no_scan_problem(self, bag: BagReader) -> str:
+        """Why there is no usable scan in ``bag``, in words (after :meth:`read_inputs` found none)."""
         return (f"no usable scan on {self.options.topic}: every scan was skipped "
-                f"({', '.join(f'{n} {r}' for r, n in self.skipped.items()) or 'none recorded'})")
+                f"({', '.join(f'{n} {r}' for r, n in self.skipped.items()) or 'none recorded'})"
+                f"{bag.decode_note(self.options.topic)}")
 
     def run(self) -> NdtOdomResult:
         with open_bag(self.bag_path) as bag:
@@ -253,7 +254,7 @@ class NdtOdomPipeline:
                 raise BagtoolsError(f"--init odom needs wheel odometry, but the bag has no {ODOM_TOPIC} and no "
                                     f"'{self.odom_frame}' frame with a child in /tf (use --init auto)", self.bag_path)
             if len(stamps) == 0:
-                return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), self.no_scan_problem())
+                return NdtOdomResult(None, None, None, FrontEndRun(), self._summary(None, 0.0), self.no_scan_problem(bag))
             order, odometry = inputs.order, inputs.odometry
             t0 = time.perf_counter()
             front, poses = self.register(inputs)

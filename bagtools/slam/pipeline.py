@@ -207,7 +207,8 @@ class SlamPipeline:
         with open_bag(self.bag_path) as bag:
             require_topic(bag, self.options.topic, LASERSCAN_TYPES, "LaserScan")
             if next(bag.messages([self.options.topic]), None) is None:
-                raise BagtoolsError(f"topic {self.options.topic} holds no scans", self.bag_path)
+                raise BagtoolsError(f"topic {self.options.topic} holds no scans{bag.decode_note(self.options.topic)}",
+                                    self.bag_path)
 
     def _front_end(self) -> NdtOdomResult:
         result = self.front_end(self.bag_path, self.options)
