@@ -25,6 +25,7 @@ import numpy as np
 
 from bagtools.cloudmap.accumulator import MIN_VOXEL_M, MapCloud, PointAccumulator, random_indices
 from bagtools.cloudmap.held import HeldCloud, HeldClouds
+from bagtools.cloudmap.refine import CloudRefiner
 from bagtools.dataset import SensorStream
 from bagtools.dataset.scans import SensorPoints
 from bagtools.io import LaserScanArrays
@@ -34,11 +35,14 @@ from bagtools.progress import progress
 from bagtools.simtruth import anchor_frame_in_map, load_sim_world, read_ground_truth
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf, guess_base_frame
 from bagtools.tf import ConnectivityException, ExtrapolationException, LookupException, TfBuffer, TransformException
+from bagtools.trajectory import Trajectory
 
 StampMode = Literal["message", "latest"]
 
 DEFAULT_CLOUD_SAMPLE = 0.01
 """Fraction of each PointCloud2 kept when no sample is given (a depth image holds thousands of points)."""
+REFINE_CLOUD_SAMPLE = 0.1
+"""The same with --refine: ICP registers each cloud on this share of its points."""
 
 
 @dataclass(frozen=True)
@@ -50,7 +54,10 @@ class CloudMapOptions:
     cloud's bag time, as a naive live subscriber would. ``sample`` keeps that
     random fraction of each cloud (seeded); None keeps DEFAULT_CLOUD_SAMPLE of
     a PointCloud2 and every beam of a LaserScan; ``voxel_m`` downsamples the map;
-    ``max_range_m`` drops points farther than that from the sensor.
+    ``max_range_m`` drops points farther than that from the sensor. ``refine``
+    registers each cloud to the map built so far (Open3D's ICP,
+    :mod:`bagtools.cloudmap.refine`), starting where tf puts it; then
+    ``sample`` defaults to REFINE_CLOUD_SAMPLE (ICP needs more of each cloud).
     """
 
     topic: str = "/camera/depth/points"
@@ -60,6 +67,7 @@ class CloudMapOptions:
     voxel_m: float | None = None
     max_range_m: float | None = None
     seed: int = 0
+    refine: bool = False
 
     def __post_init__(self) -> None:
         if self.sample is not None and not 0.0 < self.sample <= 1.0:
@@ -106,6 +114,10 @@ class CloudMapResult:
     sensor_path: np.ndarray
     summary: dict = field(default_factory=dict)
     inputs: list[PlacedInput] = field(default_factory=list)
+    #: with --refine: the refined poses of the robot base (or of the sensor, when tf ties it to no base) in the
+    #: map's frame, one per placed cloud in bag order, and the body frame they are of
+    trajectory: Trajectory | None = None
+    trajectory_body: str | None = None
 
     @property
     def points(self) -> np.ndarray:
@@ -141,6 +153,8 @@ class CloudMapPipeline:
         self.points_in = 0
         self.sensor_frames: set[str] = set()
         self._sensor_path: list[np.ndarray] = []
+        self._refined: list[tuple[int, np.ndarray, str]] = []  # with --refine: (stamp, T_frame_body, body)
+        self.refiner: CloudRefiner | None = None
 
     def run(self) -> CloudMapResult:
         with open_bag(self.bag_path) as bag:
@@ -170,15 +184,20 @@ class CloudMapPipeline:
                                     f"{limit}, so there is no map to write", bag.path)
             summary = self._summary(cloud)
             summary.update(self._evaluate(bag, points))
-        return CloudMapResult(cloud, np.array(self._sensor_path).reshape(-1, 3), summary, self.inputs)
+        trajectory, body = self._refined_trajectory()
+        return CloudMapResult(cloud, np.array(self._sensor_path).reshape(-1, 3), summary, self.inputs, trajectory, body)
 
     # -- steps -------------------------------------------------------------------
 
     def _read(self, bag: BagReader, held: HeldClouds) -> TfCollector:
         """One pass over the sensor topic and tf: each message cut, sampled and held; tf collected."""
         opts = self.options
+        if opts.refine and bag.topics[opts.topic].msgtype in LASERSCAN_TYPES:
+            raise BagtoolsError(f"--refine registers 3D clouds; {opts.topic} holds laser scans, which lie in one plane "
+                                f"(ICP to planes cannot move them in it): `bagtools slam` matches scans", bag.path)
         self.sample = opts.sample if opts.sample is not None else (
-            1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES else DEFAULT_CLOUD_SAMPLE)
+            1.0 if bag.topics[opts.topic].msgtype in LASERSCAN_TYPES
+            else REFINE_CLOUD_SAMPLE if opts.refine else DEFAULT_CLOUD_SAMPLE)
         collector = TfCollector()
         collector.check(bag)
         self.stream = SensorStream(bag, opts.topic, desc=None, attributes=True)
@@ -256,14 +275,22 @@ class CloudMapPipeline:
         return self._base_of[tf_frame]
 
     def _place_clouds(self, held: HeldClouds) -> None:
-        """Each held message placed by tf, transformed into the map's frame and accumulated."""
-        for item in progress(held, total=held.count, desc="mapping", unit="msg"):
+        """Each held message placed by tf (and registered to the map so far, with --refine), transformed into the
+        map's frame and accumulated."""
+        refiner = self.refiner = CloudRefiner() if self.options.refine else None
+        for item in progress(held, total=held.count, desc="refining" if refiner else "mapping", unit="msg"):
             try:
                 T_frame_sensor, tf_frame, stamp_used = self._pose(item.frame_id, item.stamp_ns, item.log_time_ns)
             except TransformException as err:
                 self.skipped[_skip_reason(err)] += 1
                 continue
             sensed = item.cloud
+            if refiner is not None:
+                T_frame_sensor = refiner.refine(sensed.points, T_frame_sensor, sensed.rgb)
+                T_base_sensor = self._base_sensor(tf_frame, stamp_used)
+                body = self.base_frame if T_base_sensor is not None else tf_frame
+                T_frame_body = T_frame_sensor if T_base_sensor is None else T_frame_sensor @ np.linalg.inv(T_base_sensor)
+                self._refined.append((item.stamp_ns, T_frame_body, body))
             R, t = T_frame_sensor[:3, :3], T_frame_sensor[:3, 3]
             self.accumulator.add((sensed.points.astype(np.float64) @ R.T + t).astype(np.float32), sensed.intensity,
                                  sensed.rgb)
@@ -274,6 +301,16 @@ class CloudMapPipeline:
                 self.inputs.append(PlacedInput(item.stamp_ns, item.frame_id, sensed.points, sensed.intensity, sensed.rgb,
                                                item.scan, T_frame_sensor,
                                                self.base_frame if T_base_sensor is not None else None, T_base_sensor))
+
+    def _refined_trajectory(self) -> tuple[Trajectory | None, str | None]:
+        """The refined poses as a trajectory in stamp order (one pose per stamp), and its body frame."""
+        if not self._refined:
+            return None, None
+        stamps = np.array([stamp for stamp, _, _ in self._refined], dtype=np.int64)
+        order = np.argsort(stamps, kind="stable")
+        keep = order[np.r_[True, np.diff(stamps[order]) > 0]]
+        poses = np.stack([self._refined[k][1] for k in keep])
+        return Trajectory(stamps[keep], poses), self._refined[0][2]
 
     def _evaluate(self, bag: BagReader, points: np.ndarray) -> dict:
         """For a simulated bag: distances of the map's points to the true world surfaces.
@@ -319,6 +356,10 @@ class CloudMapPipeline:
             "points_out": len(cloud),
             "fields": cloud.fields,
             "sample_fraction": self.sample,
+            **({} if self.refiner is None else {"refined": {
+                "clouds_registered": self.refiner.registered,
+                "clouds_kept_at_tf_pose": self.clouds_used - self.refiner.registered,
+                "median_fitness": float(np.median(self.refiner.fitness)) if self.refiner.fitness else None}}),
             "options": asdict(self.options),
             "warnings": self.warnings,
         }

@@ -11,23 +11,34 @@ from bagtools.cloudmap.files import write_point_cloud
 from bagtools.cloudmap.pipeline import CloudMapResult
 from bagtools.cloudmap.render import render_map_png
 from bagtools.outputs import OutputDir
-from bagtools.results import RESULTS_MCAP, ResultsBag
+from bagtools.results import RESULTS_MCAP, ResultsBag, run_outputs
+from bagtools.trajectory.tum import tum_text
 
-CLOUD_MAP_FILES = ["cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "summary.json", RESULTS_MCAP]
+CLOUD_MAP_FILES = ["cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "trajectory.tum", "summary.json", RESULTS_MCAP]
+
+
+def cloud_map_outputs(mcap: bool, refine: bool) -> list[str]:
+    """The files a map-cloud run writes: trajectory.tum only when it refines, results.mcap only with ``mcap``, so
+    that ``--force`` replaces (and removes as stale) only what the run itself writes."""
+    return [n for n in run_outputs(CLOUD_MAP_FILES, mcap) if refine or n != "trajectory.tum"]
 
 
 def write_cloud_map(result: CloudMapResult, out_dir: str | Path, force: bool = False, mcap: bool = True) -> list[Path]:
-    """Write cloud_map.pcd/.ply/.png, summary.json and (with ``mcap``) results.mcap into ``out_dir``; all or nothing.
+    """Write cloud_map.pcd/.ply/.png, summary.json, trajectory.tum (the refined poses, with --refine) and (with
+    ``mcap``) results.mcap into ``out_dir``; all or nothing.
 
     results.mcap needs the pipeline's placed inputs (``CloudMapPipeline(..., keep_inputs=True)``).
     """
     frame = result.summary.get("frame", "map")
     written = ["cloud_map.pcd", "cloud_map.ply", "cloud_map.png", "summary.json"]
-    with OutputDir(out_dir, CLOUD_MAP_FILES, force) as staged:
+    with OutputDir(out_dir, cloud_map_outputs(mcap, result.trajectory is not None), force) as staged:
         write_point_cloud(staged / "cloud_map.pcd", result.cloud, frame)
         write_point_cloud(staged / "cloud_map.ply", result.cloud, frame)
         render_map_png(staged / "cloud_map.png", result.points, frame, result.sensor_path,
                        title=f"{result.summary.get('topic', '')} in {frame}")
+        if result.trajectory is not None:
+            (staged / "trajectory.tum").write_text(tum_text(result.trajectory, frame, result.trajectory_body))
+            written.append("trajectory.tum")
         (staged / "summary.json").write_text(json.dumps(result.summary, indent=2))
         if mcap:
             with ResultsBag(staged / RESULTS_MCAP, namespace="map_cloud") as bag:
