@@ -124,14 +124,16 @@ def _map_cloud_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.cloudmap import CloudMapOptions
 
     return WriterConfig(CloudMapOptions(topic=p["topic"], frame=p["frame"], stamp=p["stamp"], sample=p["sample"],
-                                        voxel_m=p["voxel"], max_range_m=p["max_range"], seed=p["seed"]),
+                                        voxel_m=p["voxel"], max_range_m=p["max_range"], seed=p["seed"],
+                                        refine=p["refine"]),
                         mcap=not p["no_mcap"])
 
 
 def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.cloudmap import CLOUD_MAP_FILES, CloudMapPipeline, write_cloud_map
+    from bagtools.cloudmap import CloudMapPipeline, write_cloud_map
+    from bagtools.cloudmap.writer import cloud_map_outputs
 
-    check_outputs(out_dir, CLOUD_MAP_FILES, force)
+    check_outputs(out_dir, cloud_map_outputs(config.mcap, config.options.refine), force)
     result = CloudMapPipeline(bag, config.options, keep_inputs=config.mcap).run()
     written = write_cloud_map(result, out_dir, force, mcap=config.mcap)
     return JobOutput(result.summary, [p.name for p in written])
