@@ -144,13 +144,15 @@ def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Jo
 
 def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.gridmap import GridMapOptions
+    from bagtools.gridmap.options import map_cell_size
     from bagtools.trajectory import read_tum
 
     if p["poses"] not in ("tf", "ground-truth"):
         read_tum(p["poses"])  # a missing or bad trajectory file is one error before any work, not one per bag
 
+    side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=False)
     return WriterConfig(GridMapOptions(topic=p["topic"], frame=p["frame"] or GridMapOptions.default_frame(p["poses"]),
-                                       poses=p["poses"], resolution=p["resolution"], max_range_m=p["max_range"],
+                                       poses=p["poses"], resolution=1.0 / side, max_range_m=p["max_range"],
                                        base_frame=p["base_frame"], scan_frame_offset=p["scan_frame_offset"]),
                         mcap=not p["no_mcap"])
 
@@ -194,13 +196,15 @@ def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Job
 
 
 def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
+    from bagtools.gridmap.options import map_cell_size
     from bagtools.slam import SlamOptions
     from bagtools.trajectory import read_relations
 
     if p["relations"]:
         read_relations(p["relations"])  # a missing or bad relations file is one error before any work
 
-    return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=p["resolution"],
+    side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=True)
+    return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=side,
                                     max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],
                                     loop_closure=not p["no_loop_closure"], loop_min_score=p["loop_min_score"],
                                     keep_scans=not p["no_mcap"], relations=p["relations"],

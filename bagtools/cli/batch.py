@@ -77,7 +77,7 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
     \b
     Example:
       bagtools batch ndt-odom /data/2026-11-22/ --out fleet/ndt
-      bagtools batch grid 'runs/*/robot*' --out fleet/grid --workers 4 -- --resolution 10
+      bagtools batch grid 'runs/*/robot*' --out fleet/grid --workers 4 -- --cell-size 0.1
       bagtools batch info /nfs/bags --out /nfs/fleet/info --scheduler tcp://head:8786
       bagtools batch localize 'runs/*.mcap' --out fleet/localize -- --map building/map.yaml
     """

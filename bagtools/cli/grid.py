@@ -8,6 +8,7 @@ import click
 
 from bagtools.cli.complete import complete_topics
 from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
+from bagtools.cli.params import cell_size as map_cell_side
 
 
 @click.command("grid")
@@ -19,7 +20,10 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
                    "in --frame (e.g. bagtools ndt-odom's trajectory.tum).")
 @click.option("--frame", default=None,
               help="Fixed frame to build the map in  [default: map, or the frame a bagtools TUM file --poses names]")
-@click.option("--resolution", type=float, default=20.0, show_default=True, help="Cells per metre (20: 5 cm cells).")
+@click.option("--cell-size", type=float, default=None, help="Map cell side in METRES.  [default: 0.05]")
+@click.option("--cells-per-metre", type=float, default=None, help="Map cells per metre (20: 5 cm cells), instead.")
+@click.option("--resolution", type=float, default=None,
+              help="Old spelling: cells per metre here (MATLAB's), metres per cell in slam (nav2's); prefer --cell-size.")
 @click.option("--max-range", type=float, default=None,
               help="Lower the scans' range_max to this [m]; farther returns only clear free space.")
 @click.option("--base-frame", default=None,
@@ -28,7 +32,8 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
               help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--no-mcap", "no_mcap", is_flag=True, help="Do not write results.mcap.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, resolution: float, max_range: float | None,
+def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, cell_size: float | None,
+         cells_per_metre: float | None, resolution: float | None, max_range: float | None,
          base_frame: str | None, scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool,
          force: bool) -> None:
     """Build an occupancy grid of BAG's laser scans ("mapping with known poses").
@@ -43,7 +48,7 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     \b
     Example:
       bagtools grid out/sim --out out/grid
-      bagtools grid out/sim --out out/grid_odom --frame odom --force
+      bagtools grid out/sim --out out/grid_odom --frame odom --cell-size 0.1 --force
       bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum
       bagtools grid real.bag --out grid --scan-frame-offset -0.064,0,0 --no-mcap
     """
@@ -51,15 +56,19 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, reso
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
 
+    side, note = map_cell_side(cell_size, cells_per_metre, resolution, resolution_in_metres=False)
+
     check_outputs(out_dir, run_outputs(GRID_MAP_FILES, not no_mcap), force, inputs=[bag, *([poses] if poses not in ('tf', 'ground-truth') else [])])  # fail before the work, not after it
 
     options = GridMapOptions(topic=topic, frame=GridMapOptions.default_frame(poses) if frame is None else frame, poses=poses,
-                             resolution=resolution, max_range_m=max_range, base_frame=base_frame,
+                             resolution=1.0 / side, max_range_m=max_range, base_frame=base_frame,
                              scan_frame_offset=scan_frame_offset)
     result = GridMapPipeline(bag, options, keep_scans=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
     write_grid_map(result, out_dir, force, mcap=not no_mcap)
+    if note:
+        click.echo(f"bagtools: note: {note}", err=True)
     s, g = result.summary, result.summary["grid"]
     click.echo(f"{s['scans_used']} of {s['scans_total']} scans mapped, skipped {json.dumps(s['scans_skipped'])}; "
                f"{g['cols']}x{g['rows']} cells (width x height) of {g['cell_size_m']:g} m in {out_dir}/map.yaml")

@@ -45,3 +45,17 @@ def scan_frame_offset(ctx: click.Context, param: click.Parameter, value: str | N
 
 
 SCAN_FRAME_OFFSET_HELP = "Laser pose on the robot base [m, m, rad] when tf lacks (or has a wrong) base -> laser transform."
+
+
+def cell_size(cell_size_m: float | None, cells_per_metre: float | None, resolution: float | None,
+              resolution_in_metres: bool) -> tuple[float, str | None]:
+    """(the map cell side (m), the old spelling's note or None) of ``--cell-size``/``--cells-per-metre``/
+    ``--resolution`` (see :func:`bagtools.gridmap.options.map_cell_size`): two of them is a usage error. The caller
+    says the note once the run has succeeded (a failure stays one line)."""
+    from bagtools.gridmap.options import map_cell_size
+
+    given = [name for name, value in (("--cell-size", cell_size_m), ("--cells-per-metre", cells_per_metre),
+                                      ("--resolution", resolution)) if value is not None]
+    if len(given) > 1:
+        raise click.UsageError(f"give one of {' and '.join(given)}: each sets the map's cell size")
+    return map_cell_size(cell_size_m, cells_per_metre, resolution, resolution_in_metres)

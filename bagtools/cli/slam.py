@@ -6,14 +6,17 @@ import click
 
 from bagtools.cli.complete import complete_topics
 from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
+from bagtools.cli.params import cell_size as map_cell_side
 
 
 @click.command("slam")
 @click.argument("bag", type=click.Path(path_type=str))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=str), help="Output directory.")
 @click.option("--topic", default="/scan", shell_complete=complete_topics, show_default=True, help="LaserScan topic.")
-@click.option("--resolution", type=float, default=0.05, show_default=True,
-              help="Map cell side in METRES (0.05: 5 cm cells; note: `bagtools grid --resolution` is cells per metre).")
+@click.option("--cell-size", type=float, default=None, help="Map cell side in METRES.  [default: 0.05]")
+@click.option("--cells-per-metre", type=float, default=None, help="Map cells per metre (20: 5 cm cells), instead.")
+@click.option("--resolution", type=float, default=None,
+              help="Old spelling: metres per cell here (nav2's), cells per metre in grid (MATLAB's); prefer --cell-size.")
 @click.option("--loop-search-radius", type=float, default=5.0, show_default=True,
               help="Match keyframes this far apart [m] (plus their estimated drift) for loop closure.")
 @click.option("--loop-min-score", type=float, default=0.5, show_default=True,
@@ -31,7 +34,8 @@ from bagtools.cli.params import SCAN_FRAME_OFFSET_HELP, scan_frame_offset
               help=SCAN_FRAME_OFFSET_HELP)
 @click.option("--no-mcap", is_flag=True, help="Do not write results.mcap (the map, paths, scans and loops for Foxglove).")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
-def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radius: float, loop_min_score: float,
+def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_metre: float | None,
+         resolution: float | None, loop_search_radius: float, loop_min_score: float,
          no_loop_closure: bool, no_odometry: bool, max_range: float | None, relations: str | None,
          scan_frame_offset: tuple[float, float, float] | None, no_mcap: bool, force: bool) -> None:
     """SLAM of BAG's laser scans: laser odometry, loop closures, a pose graph optimized with GTSAM, the map.
@@ -58,9 +62,11 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     from bagtools.results import run_outputs
     from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
 
+    side, note = map_cell_side(cell_size, cells_per_metre, resolution, resolution_in_metres=True)
+
     check_outputs(out_dir, run_outputs(SLAM_FILES, not no_mcap), force, inputs=[bag, *([relations] if relations else [])])  # fail before the work, not after it
 
-    options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=resolution, max_range_m=max_range,
+    options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=side, max_range_m=max_range,
                           loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
                           loop_min_score=loop_min_score, keep_scans=not no_mcap, relations=relations,
                           scan_frame_offset=scan_frame_offset)
@@ -68,6 +74,8 @@ def slam(bag: str, out_dir: str, topic: str, resolution: float, loop_search_radi
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)
     written = write_slam(result, out_dir, force, mcap=not no_mcap)
+    if note:
+        click.echo(f"bagtools: note: {note}", err=True)
     s = result.summary
     loops = s["loop_closure"]
     reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())

@@ -15,6 +15,37 @@ MAX_GRID_CELLS = 100_000_000
 MIN_RESOLUTION = 0.1
 MAX_RESOLUTION = 1000.0
 """Cells per metre accepted by --resolution (cells of 10 m to 1 mm)."""
+DEFAULT_CELL_SIZE_M = 0.05
+"""The map cell side of grid and slam when none is given (m)."""
+
+
+def map_cell_size(cell_size_m: float | None, cells_per_metre: float | None, resolution: float | None,
+                  resolution_in_metres: bool) -> tuple[float, str | None]:
+    """(the map cell side in metres, a one-line note or None) from ``--cell-size`` (m), ``--cells-per-metre`` or the
+    old ``--resolution``, which ``grid`` reads as cells per metre (MATLAB's) and ``slam`` as metres (nav2's:
+    ``resolution_in_metres``); at most one of them may be given (BagtoolsError). The note, for the old spelling,
+    says what it was read as."""
+    given = [name for name, value in (("--cell-size", cell_size_m), ("--cells-per-metre", cells_per_metre),
+                                      ("--resolution", resolution)) if value is not None]
+    if len(given) > 1:
+        raise BagtoolsError(f"give one of {' and '.join(given)}: each sets the map's cell size")
+    note = None
+    if cells_per_metre is not None or (resolution is not None and not resolution_in_metres):
+        per_metre = cells_per_metre if cells_per_metre is not None else resolution
+        if not (math.isfinite(per_metre) and MIN_RESOLUTION <= per_metre <= MAX_RESOLUTION):
+            raise BagtoolsError(f"{given[0]} must be between {MIN_RESOLUTION:g} and {MAX_RESOLUTION:g} cells per metre "
+                                f"(cells of 10 m to 1 mm), got {per_metre}")
+        side = 1.0 / per_metre
+    else:
+        side = DEFAULT_CELL_SIZE_M if not given else cell_size_m if cell_size_m is not None else resolution
+        if not (math.isfinite(side) and 1.0 / MAX_RESOLUTION <= side <= 1.0 / MIN_RESOLUTION):
+            raise BagtoolsError(f"{given[0] if given else 'the cell size'} must be a cell side between "
+                                f"{1.0 / MAX_RESOLUTION:g} and {1.0 / MIN_RESOLUTION:g} metres, got {side}")
+    if resolution is not None:
+        unit = "metres per cell (nav2's)" if resolution_in_metres else "cells per metre (MATLAB's)"
+        note = (f"--resolution {resolution:g} read as {unit}: a cell of {side:g} m; --cell-size {side:g} says so in "
+                "every command")
+    return side, note
 
 
 @dataclass(frozen=True)

@@ -251,13 +251,13 @@ class GridMapPipeline:
         lo_cells, hi_cells = np.floor(lo * res), np.ceil(hi * res)
         cols, rows = (hi_cells - lo_cells).astype(float)
         check_memory(cols * rows * GRID_BYTES_PER_CELL, f"a grid of {cols:.0f} x {rows:.0f} cells at {res:g} cells/m",
-                     "use coarser cells (--resolution)")
+                     "use coarser cells (--cell-size)")
         if cols * rows > self.options.max_cells:
             width, height = (hi - lo)
             raise BagtoolsError(
                 f"the map would span {width:.0f} m x {height:.0f} m, {cols * rows:.3g} cells at {res:g} cells/m, "
-                f"more than the limit of {self.options.max_cells:.3g}: check the poses (--poses, --frame) or lower "
-                "--resolution", bag_path)
+                f"more than the limit of {self.options.max_cells:.3g}: check the poses (--poses, --frame) or use "
+                "coarser cells (--cell-size)", bag_path)
         if self.grid is None:
             self.grid = OccupancyGrid(cols / res, rows / res, res, lo_cells / res)
         else:
