@@ -33,6 +33,7 @@ from bagtools.localize.tracker import (
 )
 from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
 from bagtools.progress import progress
+from bagtools.scan_matching import CorrelativeReference
 from bagtools.simtruth import read_ground_truth, read_poses
 from bagtools.slam.evaluate import ape_aligned
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation
@@ -136,6 +137,13 @@ class LocalizePipeline:
                 poses[k] = tracked[step]
         events = [Event(e.kind, int(inputs.order[e.index]), e.stamp_ns, e.pose) for e in localizer.events]
         known = np.isfinite(poses).all(axis=1)
+        self.fit = map_fit(localizer, self._front)
+        if self.fit is not None and self.fit["ratio"] < MIN_MAP_FIT_RATIO:
+            raise BagtoolsError(
+                f"the scans do not fit the map {self.map_yaml}: where it placed them they score a median "
+                f"{self.fit['map_score']:.2f} on it, against {self.fit['own_score']:.2f} on the bag's own neighbouring "
+                f"scans (under {MIN_MAP_FIT_RATIO:g} of that): a map of another place, or at another scale (check its "
+                "resolution)", self.bag_path)
         if not known.any():
             raise BagtoolsError(f"no scan on {self.options.topic} could be placed in the map {self.map_yaml}: none of "
                                 f"the {len(stamps)} scans matched one place of it well enough (a bag from another "
@@ -149,6 +157,8 @@ class LocalizePipeline:
                                 {}, dataset.base_frame or dataset.scan_frame, dataset.scan_frame, inputs.T_base_scan,
                                 dataset.scans, dataset.odom_frame, dataset.odometry_frame_parent())
         result.summary = self._summary(result, localizer, elapsed_s)
+        if self.fit is not None:
+            result.summary["map_fit"] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.fit.items()}
         return result
 
     # -- steps ------------------------------------------------------------------------------------
@@ -179,6 +189,7 @@ class LocalizePipeline:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
         t0 = time.perf_counter()
         front, odom = dataset.register(inputs)
+        self._front = front
         self.warnings.extend(front.warnings(self.options.topic))
         t1 = time.perf_counter()
         by_state: dict[str, float] = {}
@@ -328,6 +339,43 @@ class LocalizePipeline:
                 "parts": parts, "difference": {"stamp_ns": [int(s) for s in common],
                                                "translation_m": [round(float(v), 4) for v in dist],
                                                "heading_deg": [round(float(v), 3) for v in heading]}}
+
+
+#: The scans must fit the map at least this share as well as they fit their own neighbours (see :func:`map_fit`).
+MIN_MAP_FIT_RATIO = 0.5
+#: Scans sampled for the check, and how many neighbours on each side make each one's own map.
+FIT_SAMPLE_SCANS, FIT_NEIGHBOURS = 50, 3
+
+
+def map_fit(localizer: MapLocalizer, front) -> dict | None:
+    """How well the scans fit the map, against how well they fit each other: for up to FIT_SAMPLE_SCANS of the
+    scans the map placed by a match, the median of their scores on the map (the localizer's) and of their scores
+    on the map of their FIT_NEIGHBOURS neighbours on each side (placed by the laser odometry, the same raster and
+    kernel): what a right fix scores in this scene with this laser. None without matched scans."""
+    matched = sorted(localizer.matched)
+    if not matched:
+        return None
+    steps = front.run.steps
+    sample = matched[:: max(1, len(matched) // FIT_SAMPLE_SCANS)]
+    resolution = localizer.fine.resolution_m
+    own, on_map = [], []
+    for i in sample:
+        near = [j for j in range(max(0, i - FIT_NEIGHBOURS), min(len(steps), i + FIT_NEIGHBOURS + 1)) if j != i]
+        placed = []
+        for j in near:
+            T = se2_between(steps[i].pose, steps[j].pose)
+            c, s = np.cos(T[2]), np.sin(T[2])
+            placed.append(steps[j].points_base @ np.array([[c, s], [-s, c]]) + T[:2])
+        points = np.vstack(placed) if placed else np.zeros((0, 2))
+        if len(points) < 5 or len(steps[i].points_base) < 5:
+            continue
+        own.append(CorrelativeReference.from_points(points, resolution).score(steps[i].points_base, np.zeros(3)))
+        on_map.append(localizer.scores[i])
+    if not own:
+        return None
+    own_score, map_score = float(np.median(own)), float(np.median(on_map))
+    return {"map_score": map_score, "own_score": own_score, "ratio": map_score / max(own_score, 1e-9),
+            "scans": len(own)}
 
 
 def _tracking_speed(duration_s: float, counts: dict[str, int], timing_s: dict) -> float | None:

@@ -559,3 +559,50 @@ def test_a_robot_standing_still_off_the_map_is_not_searched_for_again_and_again(
         localizer.step(step, stamp, inputs.points_base(j), odom[j], continuous=True)
         step += 1
     assert len(searches) > before
+
+
+def _rescaled(map_yaml: Path, factor: float, out: Path) -> Path:
+    """The same image with its YAML's resolution multiplied by ``factor`` (a map at the wrong scale)."""
+    out.mkdir(parents=True, exist_ok=True)
+    text = map_yaml.read_text()
+    image = next(line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("image:"))
+    (out / Path(image).name).write_bytes((map_yaml.parent / image).read_bytes())
+    resolution = next(float(line.split(":", 1)[1]) for line in text.splitlines() if line.startswith("resolution:"))
+    lines = [f"resolution: {resolution * factor}" if line.startswith("resolution:") else
+             f"image: {Path(image).name}" if line.startswith("image:") else line for line in text.splitlines()]
+    (out / "map.yaml").write_text("\n".join(lines) + "\n")
+    return out / "map.yaml"
+
+
+@pytest.mark.parametrize("wrong", ["twice the scale", "a rectangular room"])
+def test_a_map_the_scans_cannot_fit_is_refused(world: dict, tmp_path: Path, capsys, wrong: str) -> None:
+    """Placed somewhere in a map of another place or scale, the scans fit it far worse than they fit each other
+    (the laser odometry's neighbours): refused in one line, not '101 of 101 localized' metres off (#42)."""
+    if wrong == "twice the scale":
+        map_yaml = _rescaled(Path(world["map"]), 2.0, tmp_path / "scaled")
+    else:
+        map_yaml = _rectangle_map(tmp_path / "rect", 5.0, 3.5)
+    with pytest.raises(SystemExit) as done:
+        main(["localize", str(world["bag"]), "--map", str(map_yaml), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert done.value.code == 2 and len(err) == 1, err
+    assert "do not fit the map" in err[0] or "could be placed in the map" in err[0], err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_right_map_fits_as_well_as_the_scans_fit_each_other(world: dict) -> None:
+    fit = LocalizePipeline(world["bag"], world["map"]).run().summary["map_fit"]
+    assert fit["ratio"] > 0.8 and fit["scans"] >= 20, fit
+
+
+def _rectangle_map(directory: Path, width_m: float, height_m: float) -> Path:
+    """A bare rectangular room of ``width_m`` x ``height_m`` (walls only, free inside), 5 cm cells, centred on 0."""
+    directory.mkdir()
+    cols, rows = int(round(width_m / 0.05)) + 20, int(round(height_m / 0.05)) + 20
+    image = np.full((rows, cols), 205, dtype=np.uint8)
+    image[10:-10, 10:-10] = 254
+    image[10, 10:-10] = image[-11, 10:-10] = image[10:-10, 10] = image[10:-10, -11] = 0
+    (directory / "rect.pgm").write_bytes(f"P5\n{cols} {rows}\n255\n".encode() + image.tobytes())
+    (directory / "rect.yaml").write_text(f"image: rect.pgm\nresolution: 0.05\norigin: [{-cols * 0.025}, "
+                                         f"{-rows * 0.025}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    return directory / "rect.yaml"
