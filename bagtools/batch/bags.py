@@ -28,6 +28,7 @@ from bagtools.errors import BagError, BagtoolsError
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 #: A directory holding this file is a batch's output directory (see :mod:`bagtools.batch.fleet`).
 BATCH_MANIFEST = ".bagtools-batch.json"
+BATCH_LOCK = ".bagtools-batch.lock"
 #: Names the batch itself writes in its output directory, which no bag may take.
 RESERVED_NAMES = frozenset({"fleet.csv", "fleet.parquet", "fleet.png", BATCH_MANIFEST})
 

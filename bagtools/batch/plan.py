@@ -8,18 +8,22 @@ outputs are complete are ``skipped`` rows (unless ``force``), the others become
 
 The output directory belongs to one command: a manifest,
 ``DIR/.bagtools-batch.json``, records it, and a rerun with another command
-is refused (the bags' directories would mix two commands' files).
+is refused (the bags' directories would mix two commands' files). While a
+batch runs it holds ``DIR/.bagtools-batch.lock``: a second batch into the same
+directory at once is refused, and the first runs.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bagtools.batch.bags import BATCH_MANIFEST, RESERVED_NAMES, find_bags, output_names
+from bagtools.batch.bags import BATCH_LOCK, BATCH_MANIFEST, RESERVED_NAMES, find_bags, output_names
 from bagtools.batch.jobs import Job, get_job
 from bagtools.batch.task import (
     COMMON_COLUMNS, FAILED, BagTask, ForeignOutputError, check_owner, completed_row, new_row, read_marker,
@@ -45,10 +49,17 @@ class BatchPlan:
     bags: list[tuple[Path, str]]
     tasks: list[BagTask] = field(default_factory=list)
     decided: dict[str, dict] = field(default_factory=dict)
+    lock_fd: int | None = None  # the output directory's batch lock, held while the plan lives (lock_out_dir)
 
     @property
     def total(self) -> int:
         return len(self.bags)
+
+    def release(self) -> None:
+        """Let other batches into the output directory (the lock is also released when the process ends)."""
+        if self.lock_fd is not None:
+            os.close(self.lock_fd)
+            self.lock_fd = None
 
     def ordered(self, rows: Mapping[str, dict]) -> list[dict]:
         """``rows`` (keyed by bag name) in the order of the bags."""
@@ -79,6 +90,27 @@ def check_out_dir(out_dir: Path, command: str) -> None:
                                 out_dir)
 
 
+def lock_out_dir(out_dir: Path) -> int:
+    """Create ``out_dir`` if needed and hold its batch lock (``BATCH_LOCK``) for as long as the returned file
+    descriptor is open (the process's life: the kernel releases it however the process ends). A second batch into
+    the same directory at once is refused (BagtoolsError naming the first's pid): the two would write the same
+    bags' directories."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out_dir / BATCH_LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
+        os.close(fd)
+        raise BagtoolsError(f"another batch (pid {holder}) is writing into this directory now; wait for it to end, "
+                            "or use another --out", out_dir) from None
+    mine = f"{os.getpid()}\n".encode()
+    if os.pread(fd, 64, 0) != mine:  # the holder's pid, for the message of a batch refused meanwhile
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, mine, 0)
+    return fd
+
+
 def claim_out_dir(out_dir: Path, command: str) -> None:
     """Create the output directory and its manifest (once; atomically)."""
     from bagtools.outputs import write_text_atomic
@@ -104,6 +136,7 @@ def plan_batch(command: str, bag_args: Sequence[str], out_dir: str | Path, param
     names = output_names(bags)
     settings = _json_settings({k: v for k, v in params.items() if k not in job.ignored})
     plan = BatchPlan(command, job, out_dir, force, list(zip(bags, names)))
+    plan.lock_fd = lock_out_dir(out_dir)  # before reading what earlier runs left: no other batch changes it now
     for bag, name in plan.bags:
         task = BagTask(command, str(bag), name, str(out_dir), options, settings, force)
         marker = read_marker(task.bag_dir)

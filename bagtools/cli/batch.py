@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import click
 
 from bagtools.errors import BagtoolsError
+
+if TYPE_CHECKING:
+    from bagtools.batch import BatchPlan
 
 #: More worker processes than this on one machine is a typo (each is a Python process of its own).
 MAX_WORKERS = 1024
@@ -81,8 +85,8 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
       bagtools batch info /nfs/bags --out /nfs/fleet/info --scheduler tcp://head:8786
       bagtools batch localize 'runs/*.mcap' --out fleet/localize -- --map building/map.yaml
     """
-    from bagtools.batch import FAILED, SKIPPED, BatchRun, ClusterSpec, plan_batch, write_fleet
-    from bagtools.cli import COMMANDS, Terminated
+    from bagtools.batch import plan_batch
+    from bagtools.cli import COMMANDS
 
     ctx = click.get_current_context()
     if scheduler is not None and workers is not None:
@@ -92,6 +96,17 @@ def batch(command: str, bags: tuple[str, ...], out_dir: str, workers: int | None
                                "option out for a cluster on this machine", ctx)
     params = _command_params(command, list(ctx.meta.get(_COMMAND_ARGS, [])))
     plan = plan_batch(command, bags, out_dir, params, force, available=set(COMMANDS))
+    try:
+        _run_plan(plan, command, out_dir, workers, scheduler)
+    finally:
+        plan.release()
+
+
+def _run_plan(plan: BatchPlan, command: str, out_dir: str, workers: int | None, scheduler: str | None) -> None:
+    """Run the planned batch, write the fleet table and say how it went (exit status 1 when a bag failed)."""
+    from bagtools.batch import FAILED, SKIPPED, BatchRun, ClusterSpec, write_fleet
+    from bagtools.cli import Terminated
+
     done_before = len(plan.decided)
     if done_before:
         click.echo(f"{done_before} of {plan.total} bags need no work (done before, or refused); "

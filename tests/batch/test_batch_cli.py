@@ -14,7 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from bagtools.batch.bags import BATCH_MANIFEST
+from bagtools.batch.bags import BATCH_LOCK, BATCH_MANIFEST
 from bagtools.batch.jobs import JOBS
 from bagtools.batch.task import MARKER
 from bagtools.cli import main
@@ -128,7 +128,8 @@ def test_bad_bags_are_rows_a_rerun_skips_what_is_done_and_force_redoes_it(fleet:
 
     # Nothing else in DIR touched: the failed bags have no directory, the user's file is as it was.
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(
-        [BATCH_MANIFEST, "a__run1", "b__run1", "fleet.csv", "fleet.parquet", "fleet.png", "notes.txt", "run2", "run3"])
+        [BATCH_LOCK, BATCH_MANIFEST, "a__run1", "b__run1", "fleet.csv", "fleet.parquet", "fleet.png", "notes.txt", "run2",
+         "run3"])
     assert (out_dir / "notes.txt").read_text() == "the user's own file"
     for name in ("a__run1", "b__run1", "run2", "run3"):
         assert sorted(p.name for p in (out_dir / name).iterdir()) == GRID_FILES
@@ -179,3 +180,23 @@ def test_interrupted_with_ctrl_c_a_rerun_does_only_the_unfinished_bags(long_flee
     assert sorted(r["bag"] for r in rows if r["status"] == "skipped") == finished
     assert len([r for r in rows if r["status"] == "ok"]) == len(long_fleet) - len(finished)
     assert not [p for p in out_dir.rglob("*.tmp")]  # a bag stopped in the middle left nothing behind
+
+
+def test_a_second_batch_into_the_same_directory_at_once_is_refused_and_the_first_runs(fleet: Fleet,
+                                                                                        tmp_path: Path) -> None:
+    """Two batches into one --out at once (#42): the second is refused in one line before any work, naming the
+    first's pid; the first is not disturbed; once it has ended, the directory is free again."""
+    from bagtools.batch.plan import lock_out_dir
+
+    out_dir = tmp_path / "fleet"
+    first = lock_out_dir(out_dir)  # a batch running now
+    argv = [sys.executable, "-m", "bagtools", "batch", "info", str(fleet.good[0]), "--out", str(out_dir)]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"bagtools: {out_dir}: another batch (pid {os.getpid()}) is writing into this directory now; wait for it to "
+        "end, or use another --out"]
+    assert sorted(p.name for p in out_dir.iterdir()) == [BATCH_LOCK]
+    os.close(first)  # the first batch ends
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
