@@ -133,12 +133,16 @@ class SlamOptions:
 FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 
 
+def front_end_options(options: SlamOptions) -> NdtOdomOptions:
+    """The laser odometry's options for this run: its topic, odometry setting and laser mount."""
+    return NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry,
+                          scan_frame_offset=options.scan_frame_offset)
+
+
 def laser_odometry(bag_path: Path, options: SlamOptions) -> NdtOdomResult:
     """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting
     (keeping the scans when results.mcap will replay them)."""
-    return run_front_end(bag_path, NdtOdomOptions(topic=options.topic, use_odometry=options.use_odometry,
-                                                  scan_frame_offset=options.scan_frame_offset),
-                         keep_scans=options.keep_scans)
+    return run_front_end(bag_path, front_end_options(options), keep_scans=options.keep_scans)
 
 
 @dataclass
@@ -290,6 +294,14 @@ class SlamPipeline:
         poses = back.graph.poses
         return np.array([[poses[a, :2], poses[b, :2]] for a, b in pairs]).reshape(-1, 2, 2)
 
+    def _settings(self, cell_size_m: float | None) -> dict:
+        """Every setting the run's front end and loop closure used, as run (the NDT cell the scans chose included):
+        what a script needs to say how a trajectory was made."""
+        back = self.options.back_end_options()
+        front = asdict(front_end_options(self.options).front_end(cell_size_m)) if cell_size_m else None
+        return {"front_end": front, "loop_closure": None if back.loop is None else asdict(back.loop),
+                "back_end": {k: v for k, v in asdict(back).items() if k != "loop"}}
+
     def _summary(self, result: NdtOdomResult, back: BackEndResult, map_summary: dict, evaluation: dict) -> dict:
         front = result.front_end
         front_summary = {k: v for k, v in result.summary.items()
@@ -335,6 +347,7 @@ class SlamPipeline:
             **evaluation,
             "timing_s": {k: round(v, 3) for k, v in self.timing_s.items()},
             "options": asdict(self.options),
+            "settings": self._settings(front_summary.get("cell_size_m")),
             "warnings": list(dict.fromkeys(self.warnings)),
         }
         return summary

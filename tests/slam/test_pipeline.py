@@ -92,6 +92,11 @@ def test_outputs_are_complete_and_readable(figure8_slam) -> None:
     written = json.loads((out / "summary.json").read_text())
     assert written["loop_closure"]["accepted"] == s["loop_closure"]["accepted"]
     assert set(written["timing_s"]) >= {"front_end", "back_end", "map", "total"}
+    # every setting the run used, as run: the NDT cell the scans chose, the loop search's window and gates
+    settings = written["settings"]
+    assert settings["front_end"]["cell_size_m"] == s["front_end"]["cell_size_m"]
+    assert settings["loop_closure"]["search_radius_m"] == 5.0 and settings["loop_closure"]["min_score"] == 0.5
+    assert settings["back_end"]["loop_kernel"] == "huber"
 
 
 def test_without_loop_closure_the_trajectory_is_the_front_end(figure8_bag: Path, figure8_front: FrontEndRun) -> None:
