@@ -74,9 +74,8 @@ import numpy as np
 from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
 from bagtools.scan_matching import GridMatchResult, NdtReference, match_scans, match_scans_grid
 from bagtools.scan_matching.correlative import RASTER_MAX
-from bagtools.odometry.frontend import (
-    CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, ODOM_NOISE_M, ODOM_NOISE_RAD, ODOM_NOISE_RATIO, ODOM_TURN_NOISE_RATIO,
-    PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S,
+from bagtools.odometry.motion import (
+    ODOM_NOISE_M, ODOM_NOISE_RATIO, PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S, odometry_sd, steady_velocity_sd,
 )
 from bagtools.transforms import se2_between, se2_compose
 
@@ -405,10 +404,8 @@ class MapLocalizer:
         if odom is not None and h.anchor is not None:
             pose, at = h.anchor
             step = se2_between(at, odom)
-            grow = np.array([ODOM_NOISE_RATIO, ODOM_NOISE_RATIO, 0.0]) * math.hypot(step[0], step[1]) + np.array(
-                [0.0, 0.0, ODOM_TURN_NOISE_RATIO]) * abs(step[2])
             floor = SCAN_MATCHED_NOISE_M if self._continuous else ODOM_NOISE_M
-            return se2_compose(pose, step), np.array([floor, floor, ODOM_NOISE_RAD]) + grow
+            return se2_compose(pose, step), odometry_sd(step, floor)
         if len(h.recent) >= 2:
             t1, p1 = h.recent[-1]
             older = [(t, p) for t, p in h.recent if (t1 - t) * 1e-9 >= VELOCITY_SPAN_S]
@@ -416,9 +413,7 @@ class MapLocalizer:
                 t0, p0 = older[-1]
                 rate = se2_between(p0, p1) / ((t1 - t0) * 1e-9)
                 step = rate * ((stamp_ns - t1) * 1e-9)
-                sd = np.array([CV_STEADY_M, CV_STEADY_M, CV_STEADY_RAD]) + CV_STEADY_RATIO * np.abs(
-                    np.array([math.hypot(step[0], step[1])] * 2 + [step[2]]))
-                return se2_compose(p1, step), sd
+                return se2_compose(p1, step), steady_velocity_sd(step)
         return h.pose.copy(), None
 
     def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None,

@@ -1,7 +1,8 @@
 """Laser odometry: the front end that slam, ndt-odom and localize share.
 
 ``LaserOdometry`` registers scans in order (:mod:`bagtools.odometry.frontend`); what it hands on is a
-``FrontEndRun`` of ``ScanStep`` (:mod:`bagtools.odometry.steps`).
+``FrontEndRun`` of ``ScanStep`` (:mod:`bagtools.odometry.steps`). The motion model it predicts each step with,
+which the localizer shares, is :mod:`bagtools.odometry.motion`.
 """
 
 from bagtools.odometry.frontend import FrontEndOptions, LaserOdometry, cell_size_for, normalized_score

@@ -88,6 +88,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bagtools.odometry.motion import (  # the motion model, shared with the localizer
+    CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO, MOTION_MEMORY_S, PRIOR_WEIGHT_DEFAULT, STAMP_JITTER_S, VELOCITY_SPAN_S,
+    odometry_sd, steady_velocity_sd,
+)
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
@@ -130,18 +134,10 @@ AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
 #: keyframe's (``ScanStep.trusted`` is False): a robot carried away matches nothing of it (a fallback, at 0.1 of the
 #: typical score on simulated kidnaps), while a scan merely harder to match scores 0.6 of it or more.
 CONTINUITY_SCORE_RATIO = 0.5
-#: Odometry's noise per step: a floor plus a share of the motion (sd, m and rad).
-ODOM_NOISE_M, ODOM_NOISE_RATIO = 0.05, 0.1
-ODOM_NOISE_RAD, ODOM_TURN_NOISE_RATIO = 0.05, 0.3
-#: Constant velocity's uncertainty: a floor, what acceleration can change in the step, and a share of the motion.
-CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO = 0.05, 0.03, 0.2
-#: A candidate's score loses this much per unit of squared Mahalanobis distance from the prior: where the
-#: scene cannot tell poses apart (a corridor), the prior decides; where it can, the score does.
-PRIOR_WEIGHT_DEFAULT = 0.01
 #: What overruling the odometry costs, in normalized score (see _Prior).
 OUTLIER_COST = 0.25
-#: Without odometry: constant velocity's narrow spread (m, rad, share of the motion), and what overruling it costs.
-CV_STEADY_M, CV_STEADY_RAD, CV_STEADY_RATIO, CV_OUTLIER_COST = 0.1, 0.1, 0.2, 0.12
+#: Without odometry: what overruling constant velocity's narrow spread (motion.CV_STEADY_*) costs.
+CV_OUTLIER_COST = 0.12
 #: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
 PRIOR_GATE2 = 14.0
 #: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
@@ -149,18 +145,6 @@ LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
 #: Beyond what the robot can do in a step (max speed and turn rate x time), the prior's cost grows by one per
 #: this much more (m, rad).
 REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
-#: A scan's stamp may be off by this much (s): what the robot can do in a step (its reach, the search window) is
-#: reckoned over the time step plus this, so that a late or early stamp (a driver's, or a log resampled from
-#: another clock) does not rule out the true motion.
-STAMP_JITTER_S = 0.25
-#: Constant velocity is the motion over at least this much time (s): over one step, a stamp off by STAMP_JITTER_S
-#: would make it anything.
-VELOCITY_SPAN_S = 0.5
-#: A robot keeps a speed for about this long (s): over a longer step it may have stopped, waited and gone on (a log
-#: that writes a scan per metre, a pause), so the motion of such a step is taken as MOTION_MEMORY_S of travel at the
-#: recent speed, and a step of d metres over a longer span as d metres in MOTION_MEMORY_S (a speed, not an average
-#: over the waits).
-MOTION_MEMORY_S = 2.0
 #: A scan of fewer points (voxel-filtered) is not searched beyond the prior's window: a dozen returns fit somewhere in
 #: any large window as well as at the place, and could not overrule the motion model.
 MIN_WIDE_POINTS = 20
@@ -549,15 +533,11 @@ class LaserOdometry:
         if "odom" not in guesses:
             # A robot mostly keeps its speed: constant velocity as a narrow prior, with what the robot can do
             # (accelerate, stop, start turning) as the rarer alternative.
-            sd_xy = CV_STEADY_M + CV_STEADY_RATIO * float(np.hypot(motion[0], motion[1]))
-            sd_theta = CV_STEADY_RAD + CV_STEADY_RATIO * abs(float(motion[2]))
-            return _Prior(kinematic.mean, np.minimum(np.array([sd_xy, sd_xy, sd_theta]), kinematic.sd),
+            return _Prior(kinematic.mean, np.minimum(steady_velocity_sd(motion), kinematic.sd),
                           opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity",
                           origin=origin)
-        motion = _between(last_pose, guesses["odom"])
-        sd_xy = ODOM_NOISE_M + ODOM_NOISE_RATIO * float(np.hypot(motion[0], motion[1]))
-        sd_theta = ODOM_NOISE_RAD + ODOM_TURN_NOISE_RATIO * abs(float(motion[2]))
-        return _Prior(_between(kf.pose, guesses["odom"]), np.array([sd_xy, sd_xy, sd_theta]), opts.prior_weight,
+        return _Prior(_between(kf.pose, guesses["odom"]), odometry_sd(_between(last_pose, guesses["odom"])),
+                      opts.prior_weight,
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
     def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[_Match], best: _Match,
