@@ -321,17 +321,21 @@ def read_nav2_map(yaml_path: str | Path) -> Nav2Map:
         raise BagtoolsError(f"mode scale needs occupied_thresh above free_thresh, got {occ_th} and {free_th}",
                             yaml_path)
     pixels = read_pgm(image_path)
-    shade = pixels.astype(np.float64) / 255.0
+    # The occupancy of each of the 256 grey values, then looked up per pixel (a 12000 x 12000 image needs no
+    # float copies of itself).
+    values = np.arange(256, dtype=np.uint8)
+    shade = values.astype(np.float64) / 255.0
     occ = shade if negate else 1.0 - shade
     if mode == "raw":
-        occupancy = np.where(pixels <= 100, pixels, -1).astype(np.int8)
+        table = np.where(values <= 100, values, -1).astype(np.int8)
     else:
-        occupancy = np.full(pixels.shape, -1, dtype=np.int8)
+        table = np.full(256, -1, dtype=np.int8)
         if mode == "scale":  # a PGM has no alpha channel: every pixel is opaque
             between = np.rint((occ - free_th) / (occ_th - free_th) * 100.0)
-            occupancy = np.clip(between, -128, 127).astype(np.int8)
-        occupancy[occ > occ_th] = 100
-        occupancy[(occ < free_th) & ~(occ > occ_th)] = 0
+            table = np.clip(between, -128, 127).astype(np.int8)
+        table[occ > occ_th] = 100
+        table[(occ < free_th) & ~(occ > occ_th)] = 0
+    occupancy = table[pixels]
     return Nav2Map(yaml_path, image_path, mode, resolution, origin, negate, occ_th, free_th, pixels, occupancy)  # type: ignore[arg-type]
 
 

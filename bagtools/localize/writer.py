@@ -55,10 +55,23 @@ def write_localize(result: LocalizeResult, out_dir: str | Path, force: bool = Fa
 
 def map_grid(nav2_map: Nav2Map) -> OccupancyGrid:
     """The nav2 map as an :class:`OccupancyGrid` for pictures and results.mcap (occupied 1, free 0, unknown 0.5;
-    the origin's yaw, which map_server applies, is not drawn)."""
+    the origin's yaw, which map_server applies, is not drawn), cut to its known cells and a cell around them: a
+    12000 x 12000 image of a building in one corner costs what the building does."""
     ternary = nav2_map.ternary()
-    probability = np.where(ternary == 1, 1.0, np.where(ternary == 0, 0.0, 0.5))
-    return OccupancyGrid.from_probabilities(probability, 1.0 / nav2_map.resolution_m, nav2_map.origin[:2])
+    known = ternary != -1
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    del known
+    height = ternary.shape[0]
+    if rows.size:  # else the whole (unknown) image
+        r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 1, height - 1)
+        c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 1, ternary.shape[1] - 1)
+        ternary = ternary[r0:r1 + 1, c0:c1 + 1]
+    else:
+        r1, c0 = height - 1, 0
+    res = nav2_map.resolution_m
+    origin = np.asarray(nav2_map.origin[:2], dtype=np.float64) + np.array([c0 * res, (height - 1 - r1) * res])
+    probability = np.array([0.5, 0.0, 1.0], dtype=np.float32)[ternary.astype(np.intp) + 1]  # unknown, free, occupied
+    return OccupancyGrid.from_probabilities(probability, 1.0 / res, origin)
 
 
 def render_localization_png(result: LocalizeResult) -> bytes:
