@@ -60,3 +60,25 @@ def test_the_map_keeps_the_first_point_of_each_voxel() -> None:
     shifted[0, 3] = 0.01  # within the same voxels
     refiner._add(refiner._cloud(wall, None), shifted)
     assert len(refiner.points) <= len(first) + 40 and np.array_equal(refiner.points[:len(first)], first)
+
+
+@pytest.mark.parametrize("coloured", [False, True])
+def test_a_cloud_tf_misplaces_is_registered_back_onto_the_map(coloured: bool) -> None:
+    """A corner of three walls seen twice from the same place while tf says the sensor moved 6 cm: ICP (coloured
+    when the points carry rgb) puts the second cloud back where the first one is."""
+    from bagtools.cloudmap.refine import CloudRefiner
+
+    rng = np.random.default_rng(0)
+    n = 3000
+    points = np.vstack([np.c_[rng.uniform(0, 2, n), rng.uniform(0, 2, n), np.zeros(n)],
+                        np.c_[np.zeros(n), rng.uniform(0, 2, n), rng.uniform(0, 2, n)],
+                        np.c_[rng.uniform(0, 2, n), np.zeros(n), rng.uniform(0, 2, n)]])
+    rgb = (np.c_[np.sin(7 * points[:, 0]), np.cos(5 * points[:, 1]), np.sin(3 * points[:, 2])] * 127 + 128).astype(
+        np.uint8) if coloured else None
+    refiner = CloudRefiner()
+    refiner.refine(points, np.eye(4), rgb)
+    moved = np.eye(4)
+    moved[:3, 3] = [0.05, -0.03, 0.02]
+    pose = refiner.refine(points, moved, rgb)
+    assert refiner.registered == 1 and np.linalg.norm(pose[:3, 3]) < 0.005, pose[:3, 3]
+    assert np.allclose(refiner.correction[:3, 3], -moved[:3, 3], atol=0.005)
