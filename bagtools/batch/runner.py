@@ -26,6 +26,7 @@ import importlib.util
 import logging
 import os
 import threading
+import time
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -145,10 +146,10 @@ class BatchRun:
                 claim_out_dir(self.plan.out_dir, self.plan.command)
                 futures = self._submit(client, self.plan.tasks)
                 try:
-                    blamed = self._collect(futures, len(client.nthreads()))
+                    blamed = self._collect(client, futures, len(client.nthreads()))
                     for task in blamed:  # alone now: a bag that kills its worker again is the culprit
                         futures = self._submit(client, [task])
-                        self._collect(futures, len(client.nthreads()), alone=True)
+                        self._collect(client, futures, len(client.nthreads()), alone=True)
                 except BaseException:
                     client.cancel(list(futures), force=True)
                     raise
@@ -252,14 +253,15 @@ class BatchRun:
             futures[future] = task
         return futures
 
-    def _collect(self, futures: dict[Any, BagTask], workers: int, alone: bool = False) -> list[BagTask]:
+    def _collect(self, client: Any, futures: dict[Any, BagTask], workers: int, alone: bool = False) -> list[BagTask]:
         """Rows of the finished ``futures`` as they come, with a progress bar; ``workers``: how many run them.
 
         Returns the tasks Dask gave up on because their workers died (``KilledWorker``), which may be
         innocent bags queued beside the culprit; their rows are written only when ``alone`` (a task
-        run by itself, whose worker deaths are its own).
+        run by itself, whose worker deaths are its own). When no worker has been left for ``WORKERLESS_S``
+        (killed for memory and not replaced), the tasks still waiting are failed rows: the batch ends.
         """
-        from distributed import KilledWorker, as_completed
+        from distributed import KilledWorker
 
         columns = row_columns(self.plan.job)
         skipped = sum(row["status"] == SKIPPED for row in self.rows.values())
@@ -267,11 +269,17 @@ class BatchRun:
         blamed: list[BagTask] = []
         with progress_bar(total=self.plan.total, desc=f"batch {self.plan.command}", unit="bag") as bar:
             bar.update(len(self.rows))
-            for future in as_completed(list(futures)):
+            for future, lost in _as_finished(client, list(futures)):
                 remaining -= 1
                 if remaining == workers - 1 and not alone:  # a worker is idle for good: preload the fleet writers
                     threading.Thread(target=preload_fleet_writers, name="bagtools-preload", daemon=True).start()
                 task = futures[future]
+                if lost:
+                    row = new_row(task, FAILED, f"{task.bag}: no Dask worker was left to run it (the workers died, "
+                                                "killed for memory or crashed, and none took their place)")
+                    self.rows[task.name] = {k: row.get(k) for k in columns}
+                    bar.update(1)
+                    continue
                 if not alone and future.status == "error" and isinstance(future.exception(), KilledWorker):
                     blamed.append(task)
                     continue
@@ -281,6 +289,37 @@ class BatchRun:
                 failed = sum(r["status"] == FAILED for r in self.rows.values())
                 bar.set_postfix(failed=failed, skipped=skipped, refresh=False)
         return blamed
+
+
+#: How long a batch waits with tasks pending and no worker at all before it fails those tasks (s); and how often it
+#: looks (s). A worker killed for memory is replaced by its nanny within seconds, when it is.
+WORKERLESS_S = 60.0
+WATCH_S = 5.0
+
+
+def _as_finished(client: Any, futures: list[Any]) -> Iterator[tuple[Any, bool]]:
+    """(future, lost) as each of ``futures`` finishes, lost False; once no worker has been left for WORKERLESS_S
+    while some are pending, those are cancelled and given as lost (True)."""
+    from distributed import wait
+
+    pending = set(futures)
+    workerless_since: float | None = None
+    while pending:
+        try:
+            done, pending = wait(pending, timeout=WATCH_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = set()
+        for future in done:
+            yield future, False
+        if done or client.nthreads():
+            workerless_since = None
+            continue
+        workerless_since = workerless_since if workerless_since is not None else time.monotonic()
+        if time.monotonic() - workerless_since >= WORKERLESS_S:
+            client.cancel(list(pending), force=True)
+            for future in list(pending):
+                yield future, True
+            return
 
 
 def row_of_future(future: Any, task: BagTask) -> dict:

@@ -102,3 +102,30 @@ def test_no_start_line_before_the_workers_are_found_able(monkeypatch, tmp_path) 
     with pytest.raises(BagtoolsError, match="cannot see /data"):
         BatchRun(plan, ClusterSpec(scheduler="tcp://head:8786"), said.append).run()
     assert said == [] and not (tmp_path / "out").exists()
+
+
+def test_with_no_worker_left_the_waiting_bags_fail_and_the_batch_ends(monkeypatch, tmp_path) -> None:
+    """Every worker gone (killed for memory, none taking its place) while bags wait: after WORKERLESS_S they are
+    failed rows that say so, and the batch ends (#42: it waited forever). A cluster of no worker stands in."""
+    from contextlib import contextmanager
+
+    from distributed import Client, LocalCluster
+
+    from bagtools.batch import runner
+    from bagtools.batch.plan import BatchPlan
+    from bagtools.batch.runner import BatchRun
+
+    @contextmanager
+    def workerless(self):
+        with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster, Client(cluster) as client:
+            yield client
+
+    monkeypatch.setattr(BatchRun, "_client", workerless)
+    monkeypatch.setattr(runner, "WORKERLESS_S", 1.0)
+    monkeypatch.setattr(runner, "WATCH_S", 0.2)
+    tasks = [BagTask("info", f"/data/run{k}", f"run{k}", str(tmp_path / "out"), None, {}, False) for k in (1, 2)]
+    plan = BatchPlan("info", None, tmp_path / "out", False, [(tmp_path / t.name, t.name) for t in tasks], tasks=tasks)
+    monkeypatch.setattr("bagtools.batch.runner.row_columns", lambda job: ["bag", "status", "error"])
+    rows = BatchRun(plan, ClusterSpec()).run()
+    assert [r["status"] for r in rows] == [FAILED, FAILED]
+    assert all("no Dask worker was left to run it" in r["error"] for r in rows), rows
