@@ -50,16 +50,27 @@ class BatchPlan:
     tasks: list[BagTask] = field(default_factory=list)
     decided: dict[str, dict] = field(default_factory=dict)
     lock_fd: int | None = None  # the output directory's batch lock, held while the plan lives (lock_out_dir)
+    created: list[Path] = field(default_factory=list)  # folders and files this run made that hold no result
 
     @property
     def total(self) -> int:
         return len(self.bags)
 
     def release(self) -> None:
-        """Let other batches into the output directory (the lock is also released when the process ends)."""
+        """Let other batches into the output directory (the lock is also released when the process ends). A run
+        that wrote no result there (it failed as a whole: no worker could run it, a full disk) takes away the lock,
+        manifest and folders it made, so that it leaves the file system as it found it."""
         if self.lock_fd is not None:
             os.close(self.lock_fd)
             self.lock_fd = None
+        if not self.out_dir.is_dir() or any(p.name not in (BATCH_LOCK, BATCH_MANIFEST) for p in self.out_dir.iterdir()):
+            return
+        for path in reversed(self.created):  # the files, then the folders, innermost first
+            try:
+                path.rmdir() if path.is_dir() else path.unlink()
+            except OSError:  # someone else's file or folder appeared meanwhile: leave it
+                return
+        self.created = []
 
     def ordered(self, rows: Mapping[str, dict]) -> list[dict]:
         """``rows`` (keyed by bag name) in the order of the bags."""
@@ -90,12 +101,15 @@ def check_out_dir(out_dir: Path, command: str) -> None:
                                 out_dir)
 
 
-def lock_out_dir(out_dir: Path) -> int:
+def lock_out_dir(out_dir: Path) -> tuple[int, list[Path]]:
     """Create ``out_dir`` if needed and hold its batch lock (``BATCH_LOCK``) for as long as the returned file
-    descriptor is open (the process's life: the kernel releases it however the process ends). A second batch into
-    the same directory at once is refused (BagtoolsError naming the first's pid): the two would write the same
-    bags' directories."""
+    descriptor is open (the process's life: the kernel releases it however the process ends); also returns the
+    folders and the lock file this created, outermost first. A second batch into the same directory at once is
+    refused (BagtoolsError naming the first's pid): the two would write the same bags' directories."""
+    created = [p for p in reversed([out_dir, *out_dir.parents]) if not p.exists()]
     out_dir.mkdir(parents=True, exist_ok=True)
+    if not (out_dir / BATCH_LOCK).exists():
+        created.append(out_dir / BATCH_LOCK)
     fd = os.open(out_dir / BATCH_LOCK, os.O_RDWR | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -108,15 +122,17 @@ def lock_out_dir(out_dir: Path) -> int:
     if os.pread(fd, 64, 0) != mine:  # the holder's pid, for the message of a batch refused meanwhile
         os.ftruncate(fd, 0)
         os.pwrite(fd, mine, 0)
-    return fd
+    return fd, created
 
 
-def claim_out_dir(out_dir: Path, command: str) -> None:
-    """Create the output directory and its manifest (once; atomically)."""
+def claim_out_dir(out_dir: Path, command: str) -> Path | None:
+    """Create the output directory and its manifest (once; atomically); the manifest's path when this wrote it."""
     from bagtools.outputs import write_text_atomic
 
-    if not (out_dir / BATCH_MANIFEST).is_file():
-        write_text_atomic(out_dir / BATCH_MANIFEST, json.dumps({"command": command}) + "\n", force=True)
+    if (out_dir / BATCH_MANIFEST).is_file():
+        return None
+    write_text_atomic(out_dir / BATCH_MANIFEST, json.dumps({"command": command}) + "\n", force=True)
+    return out_dir / BATCH_MANIFEST
 
 
 def plan_batch(command: str, bag_args: Sequence[str], out_dir: str | Path, params: Mapping[str, Any], force: bool,
@@ -136,7 +152,8 @@ def plan_batch(command: str, bag_args: Sequence[str], out_dir: str | Path, param
     names = output_names(bags)
     settings = _json_settings({k: v for k, v in params.items() if k not in job.ignored})
     plan = BatchPlan(command, job, out_dir, force, list(zip(bags, names)))
-    plan.lock_fd = lock_out_dir(out_dir)  # before reading what earlier runs left: no other batch changes it now
+    plan.lock_fd, plan.created = lock_out_dir(out_dir)  # before reading what earlier runs left: no other batch
+    # changes it now
     for bag, name in plan.bags:
         task = BagTask(command, str(bag), name, str(out_dir), options, settings, force)
         marker = read_marker(task.bag_dir)

@@ -143,7 +143,9 @@ class BatchRun:
             with self._client() as client:
                 self._check_workers(client)
                 self._announce(client)  # only once the workers can run the batch: no start line before an error
-                claim_out_dir(self.plan.out_dir, self.plan.command)
+                manifest = claim_out_dir(self.plan.out_dir, self.plan.command)
+                if manifest is not None:
+                    self.plan.created.append(manifest)
                 futures = self._submit(client, self.plan.tasks)
                 try:
                     blamed = self._collect(client, futures, len(client.nthreads()))

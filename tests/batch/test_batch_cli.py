@@ -189,7 +189,7 @@ def test_a_second_batch_into_the_same_directory_at_once_is_refused_and_the_first
     from bagtools.batch.plan import lock_out_dir
 
     out_dir = tmp_path / "fleet"
-    first = lock_out_dir(out_dir)  # a batch running now
+    first, _ = lock_out_dir(out_dir)  # a batch running now
     argv = [sys.executable, "-m", "bagtools", "batch", "info", str(fleet.good[0]), "--out", str(out_dir)]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert done.returncode == 2, done.stderr
@@ -200,3 +200,19 @@ def test_a_second_batch_into_the_same_directory_at_once_is_refused_and_the_first
     os.close(first)  # the first batch ends
     done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
+
+
+def test_a_batch_that_fails_as_a_whole_leaves_no_folder_lock_or_manifest(fleet: Fleet, tmp_path: Path) -> None:
+    """No cluster to run on: exit 2 in one line, and the --out it would have made (two levels) is not left behind
+    with a lock or a manifest in it (#42: a failed batch left .bagtools-batch.json)."""
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out_dir = tmp_path / "new" / "fleet"
+    argv = [sys.executable, "-m", "bagtools", "batch", "info", str(fleet.good[0]), "--out", str(out_dir),
+            "--scheduler", f"tcp://127.0.0.1:{port}"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "new").exists()
