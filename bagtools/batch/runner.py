@@ -188,6 +188,12 @@ class BatchRun:
 
         n = min(self.cluster.local_workers(), len(self.plan.tasks))
         bokeh = importlib.util.find_spec("bokeh") is not None
+        # Worker processes stopped by Ctrl-C leave multiprocessing semaphores that Python's resource tracker (a
+        # process of its own, started with the cluster) cleans up, warning of each as "leaked" as the batch ends:
+        # noise after the batch's own one line. The tracker reads its warning filters from the environment.
+        quiet = "ignore:resource_tracker:UserWarning"
+        if quiet not in os.environ.get("PYTHONWARNINGS", ""):
+            os.environ["PYTHONWARNINGS"] = ",".join(filter(None, [os.environ.get("PYTHONWARNINGS"), quiet]))
         with ExitStack() as stack:
             # Dask samples every task's stack for the dashboard's profile page: 5 % of a bag's time, so only with one.
             stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": bokeh}))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -170,6 +171,8 @@ def test_interrupted_with_ctrl_c_a_rerun_does_only_the_unfinished_bags(long_flee
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "run the same command again to do the other" in err
+    # the batch's own line ends stderr: no resource_tracker warning of semaphores the stopped workers left (#42)
+    assert "leaked semaphore" not in err and err.strip().splitlines()[-1].startswith("bagtools: interrupted"), err
     finished = sorted(p.parent.name for p in out_dir.glob(f"*/{MARKER}"))
     assert 1 <= len(finished) < len(long_fleet), "the run must be stopped in the middle"
     assert not (out_dir / "fleet.csv").exists()
@@ -216,3 +219,32 @@ def test_a_batch_that_fails_as_a_whole_leaves_no_folder_lock_or_manifest(fleet: 
     done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert not (tmp_path / "new").exists()
+
+
+SEATTLE = REPO.parent / "shared" / "data" / "radish" / "seattle.log.gz"
+
+
+@pytest.mark.skipif(not SEATTLE.exists(), reason="needs ../shared/data/radish (a log whose slam runs for seconds)")
+def test_ctrl_c_while_bags_run_ends_stderr_with_the_batchs_own_line(tmp_path: Path) -> None:
+    """Ctrl-C with bags in the middle of their work (slam of a Radish log, seconds each): the last line is the
+    batch's, not multiprocessing's resource tracker warning of the semaphores the stopped workers left (#42)."""
+    bags = []
+    for k in range(3):
+        bags.append(tmp_path / "bags" / f"seattle{k}.log.gz")
+        bags[-1].parent.mkdir(exist_ok=True)
+        shutil.copyfile(SEATTLE, bags[-1])
+    out_dir = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    env.pop("PYTHONWARNINGS", None)
+    argv = ["slam", *map(str, bags), "--out", str(out_dir), "--workers", "2", "--", "--no-odometry", "--no-mcap"]
+    proc = subprocess.Popen([sys.executable, "-m", "bagtools", "batch", *argv], env=env, cwd=REPO,
+                            start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not (out_dir / BATCH_MANIFEST).exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the manifest is written once the workers are up, just before the bags are handed out
+    time.sleep(3.0)
+    assert proc.poll() is None, "the batch ended before it could be stopped"
+    proc.send_signal(signal.SIGINT)  # the batch's own process, as a terminal's Ctrl-C reaches it
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 130, err
+    assert "leaked semaphore" not in err and err.strip().splitlines()[-1].startswith("bagtools: interrupted"), err
