@@ -22,6 +22,7 @@ not by trust in the suffix. Damage is read around, and said in :attr:`BagReader.
 from __future__ import annotations
 
 import heapq
+import importlib
 import struct
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -49,6 +50,18 @@ def _apsw_errors() -> tuple[type[Exception], ...]:
     return (apsw.Error,)
 
 
+def _zstd_errors() -> tuple[type[Exception], ...]:
+    """The zstd libraries' errors (damaged compressed data): rosbags decompresses a rosbag2 file (or message)
+    compressed with zstd through ``backports.zstd`` or ``compression.zstd``, the mcap library through ``zstandard``."""
+    errors: list[type[Exception]] = []
+    for module in ("compression.zstd", "backports.zstd", "zstandard"):
+        try:
+            errors.append(importlib.import_module(module).ZstdError)
+        except (ImportError, AttributeError):
+            continue
+    return tuple(errors)
+
+
 def _one_line(err: BaseException) -> str:
     """An exception as a short single line: its type and its first 200 characters."""
     text = " ".join(str(err).split())
@@ -63,7 +76,7 @@ _SUFFIX_BY_KIND = {"mcap": ".mcap", "ros1": ".bag", "sqlite3": ".db3"}
 _READ_ERRORS = (AnyReaderError, Rosbag1ReaderError, Rosbag2ReaderError, TypesysError, SerdeError, OSError, KeyError,
                 ValueError,
                 TypeError, AssertionError, IndexError, AttributeError, OverflowError, MemoryError, EOFError,
-                struct.error, *_apsw_errors())
+                struct.error, *_apsw_errors(), *_zstd_errors())
 
 
 @dataclass(frozen=True)

@@ -74,3 +74,31 @@ def test_a_command_without_a_usable_scan_says_the_scans_cannot_be_decoded(argv: 
     assert code == 2 and last.startswith(f"bagtools: {garbage_scans}"), err
     assert f"{N_SCANS} of its messages cannot be decoded, the bag is damaged" in last, last
     assert "Traceback" not in err and not out.exists()
+
+
+def test_a_damaged_zstd_compressed_rosbag2_file_is_said_not_an_internal_error(tmp_path: Path, capsys) -> None:
+    """A rosbag2 whose storage file is zstd-compressed whole (``ros2 bag record --compression-mode file``), with
+    bytes flipped: one line saying it cannot be read, not "internal error (ZstdError ...) please report"."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode
+
+    bag = tmp_path / "compressed"
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    String = store.types["std_msgs/msg/String"]
+    rng = np.random.default_rng(5)
+    writer = Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3)
+    writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+    with writer:
+        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        for k in range(400):  # random text: the compressed file is large enough to damage in its middle
+            text = "".join(chr(c) for c in rng.integers(97, 123, 200))
+            writer.write(conn, 1_700_000_000_000_000_000 + k * 10**8, store.serialize_cdr(String(data=text),
+                                                                                         "std_msgs/msg/String"))
+    (compressed,) = bag.glob("*.zstd")
+    data = bytearray(compressed.read_bytes())
+    start = len(data) * 9 // 10  # flipped near the end: zstd's own check says the data is corrupt
+    data[start:start + 2000] = bytes(b ^ 0xFF for b in data[start:start + 2000])
+    compressed.write_bytes(bytes(data))
+    code, _, err = run(["info", str(bag)], capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith(f"bagtools: {bag}: cannot read"), err
+    assert "internal error" not in err, err
