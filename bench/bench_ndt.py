@@ -157,9 +157,10 @@ def _refine(current: np.ndarray, reference: np.ndarray, initial: np.ndarray) -> 
     return match_scans(current, reference, initial_pose=initial, cell_size=0.5, cell_model="widened").pose
 
 
-def _edt_raster(points: np.ndarray, res: float = 0.05) -> np.ndarray:
-    """The likelihood raster as it was built before: scipy's Euclidean distance transform over every cell."""
-    sigma = res
+def edt_raster(points: np.ndarray, res: float = 0.05, sigma: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The likelihood raster as it was built before (scipy's Euclidean distance transform over every cell, cut off
+    at KERNEL_CUTOFF_SIGMAS), and its origin (m): the reference the stamped raster is held to."""
+    sigma = res if sigma is None else sigma
     cutoff = correlative.KERNEL_CUTOFF_SIGMAS * sigma
     margin = int(np.ceil(cutoff / res)) + 1
     cells = np.floor(points / res)
@@ -170,7 +171,7 @@ def _edt_raster(points: np.ndarray, res: float = 0.05) -> np.ndarray:
     dist = ndimage.distance_transform_edt(free, sampling=res)
     likelihood = np.exp(-0.5 * (dist / sigma) ** 2)
     likelihood[dist > cutoff] = 0.0
-    return np.rint(likelihood * correlative.RASTER_MAX).astype(np.uint16)
+    return np.rint(likelihood * correlative.RASTER_MAX).astype(np.uint16), lo * res
 
 
 def _raster_rows(pairs: list[ScanPair]) -> list[Row]:
@@ -188,7 +189,7 @@ def _raster_rows(pairs: list[ScanPair]) -> list[Row]:
         for reference in references:
             built, dt = _best_of(lambda: CorrelativeReference.from_points(reference))
             t_stamp.append(dt)
-            edt, dt = _best_of(lambda: _edt_raster(reference))
+            (edt, _), dt = _best_of(lambda: edt_raster(reference))
             t_edt.append(dt)
             same.append(np.array_equal(built.raster, edt))
         cap = f"likelihood raster of {what} (5 cm cells, kernel cut off at 3 sigma)"

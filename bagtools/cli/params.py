@@ -52,10 +52,9 @@ def cell_size(cell_size_m: float | None, cells_per_metre: float | None, resoluti
     """(the map cell side (m), the old spelling's note or None) of ``--cell-size``/``--cells-per-metre``/
     ``--resolution`` (see :func:`bagtools.gridmap.options.map_cell_size`): two of them is a usage error. The caller
     says the note once the run has succeeded (a failure stays one line)."""
-    from bagtools.gridmap.options import map_cell_size
+    from bagtools.gridmap.options import cell_size_options_given, map_cell_size
 
-    given = [name for name, value in (("--cell-size", cell_size_m), ("--cells-per-metre", cells_per_metre),
-                                      ("--resolution", resolution)) if value is not None]
+    given = cell_size_options_given(cell_size_m, cells_per_metre, resolution)
     if len(given) > 1:
         raise click.UsageError(f"give one of {' and '.join(given)}: each sets the map's cell size")
     return map_cell_size(cell_size_m, cells_per_metre, resolution, resolution_in_metres)

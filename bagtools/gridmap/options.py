@@ -19,14 +19,21 @@ DEFAULT_CELL_SIZE_M = 0.05
 """The map cell side of grid and slam when none is given (m)."""
 
 
+def cell_size_options_given(cell_size_m: float | None, cells_per_metre: float | None,
+                            resolution: float | None) -> list[str]:
+    """The names of the cell-size options given (not None), in the order --cell-size, --cells-per-metre,
+    --resolution."""
+    return [name for name, value in (("--cell-size", cell_size_m), ("--cells-per-metre", cells_per_metre),
+                                     ("--resolution", resolution)) if value is not None]
+
+
 def map_cell_size(cell_size_m: float | None, cells_per_metre: float | None, resolution: float | None,
                   resolution_in_metres: bool) -> tuple[float, str | None]:
     """(the map cell side in metres, a one-line note or None) from ``--cell-size`` (m), ``--cells-per-metre`` or the
     old ``--resolution``, which ``grid`` reads as cells per metre (MATLAB's) and ``slam`` as metres (nav2's:
     ``resolution_in_metres``); at most one of them may be given (BagtoolsError). The note, for the old spelling,
     says what it was read as."""
-    given = [name for name, value in (("--cell-size", cell_size_m), ("--cells-per-metre", cells_per_metre),
-                                      ("--resolution", resolution)) if value is not None]
+    given = cell_size_options_given(cell_size_m, cells_per_metre, resolution)
     if len(given) > 1:
         raise BagtoolsError(f"give one of {' and '.join(given)}: each sets the map's cell size")
     note = None

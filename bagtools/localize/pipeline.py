@@ -32,6 +32,7 @@ from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
 from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
+from bagtools.odometry import FrontEndRun
 from bagtools.progress import progress
 from bagtools.scan_matching import CorrelativeReference
 from bagtools.simtruth import read_ground_truth, read_poses
@@ -137,7 +138,7 @@ class LocalizePipeline:
                 poses[k] = tracked[step]
         events = [Event(e.kind, int(inputs.order[e.index]), e.stamp_ns, e.pose) for e in localizer.events]
         known = np.isfinite(poses).all(axis=1)
-        self.fit = map_fit(localizer, self._front)
+        self.fit = map_fit(localizer, self._front.run)
         if self.fit is not None and self.fit["ratio"] < MIN_MAP_FIT_RATIO:
             raise BagtoolsError(
                 f"the scans do not fit the map {self.map_yaml}: where it placed them they score a median "
@@ -347,7 +348,7 @@ MIN_MAP_FIT_RATIO = 0.5
 FIT_SAMPLE_SCANS, FIT_NEIGHBOURS = 50, 3
 
 
-def map_fit(localizer: MapLocalizer, front) -> dict | None:
+def map_fit(localizer: MapLocalizer, run: FrontEndRun) -> dict | None:
     """How well the scans fit the map, against how well they fit each other: for up to FIT_SAMPLE_SCANS of the
     scans the map placed by a match, the median of their scores on the map (the localizer's) and of their scores
     on the map of their FIT_NEIGHBOURS neighbours on each side (placed by the laser odometry, the same raster and
@@ -355,7 +356,7 @@ def map_fit(localizer: MapLocalizer, front) -> dict | None:
     matched = sorted(localizer.matched)
     if not matched:
         return None
-    steps = front.run.steps
+    steps = run.steps
     sample = matched[:: max(1, len(matched) // FIT_SAMPLE_SCANS)]
     resolution = localizer.fine.resolution_m
     own, on_map = [], []

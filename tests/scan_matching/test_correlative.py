@@ -15,6 +15,7 @@ from bagtools.scan_matching import (
     ranges_to_points,
 )
 from bagtools.scan_matching import correlative
+from bench.bench_ndt import edt_raster
 from bench.scan_pairs import ANGLES_RAD, lds01_ranges, relative_pose, scan_pairs, turtlebot3_world
 
 TRANS_TOL_M = 0.02
@@ -341,24 +342,14 @@ def test_max_pooled_levels_bound_the_raster(pairs):
 def test_likelihood_raster_equals_the_cut_off_distance_transform(seed):
     """The stamped raster is the Euclidean distance transform's likelihood, cell for cell, cut off at the kernel's
     reach (scipy's EDT over the whole raster is the reference it replaced)."""
-    from scipy import ndimage
-
     rng = np.random.default_rng(seed)
     res = float(rng.choice([0.02, 0.05, 0.1, 0.5]))
     sigma = float(res * rng.choice([0.5, 1.0, 1.7, 3.0]))
     points = rng.normal(size=(int(rng.integers(1, 2000)), 2)) * rng.uniform(0.1, 300 * res)
     reference = CorrelativeReference.from_points(points, res, sigma)
-    cutoff = correlative.KERNEL_CUTOFF_SIGMAS * sigma
-    margin = int(np.ceil(cutoff / res)) + 1
-    cells = np.floor(points / res)
-    lo = cells.min(axis=0) - margin
-    idx = (cells - lo).astype(np.intp)
-    free = np.ones((cells.max(axis=0) - lo + margin + 1).astype(np.intp), dtype=bool)
-    free[idx[:, 0], idx[:, 1]] = False
-    dist = ndimage.distance_transform_edt(free, sampling=res)
-    expected = np.where(dist > cutoff, 0.0, np.exp(-0.5 * (dist / sigma) ** 2))
-    np.testing.assert_array_equal(reference.raster, np.rint(expected * correlative.RASTER_MAX).astype(np.uint16))
-    np.testing.assert_allclose(reference.origin, lo * res)
+    expected, origin = edt_raster(points, res, sigma)
+    np.testing.assert_array_equal(reference.raster, expected)
+    np.testing.assert_allclose(reference.origin, origin)
 # -- match_scans_grid_peaks: the distinct good poses of a window ------------------------------------------
 
 PEAK_KW = {"search_range": (1.0, 1.0, np.pi), "resolution_m": 0.1, "max_peaks": 6, "min_ratio": 0.5,
