@@ -24,3 +24,22 @@ def test_the_cli_and_every_command_module_import_nothing_heavy() -> None:
 
 def test_info_imports_nothing_heavy() -> None:
     assert _imported_after("import bagtools.baginfo") == []
+
+
+def _cli_env(user_setting: str | None) -> str:
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if user_setting is not None:
+        env["OPENBLAS_NUM_THREADS"] = user_setting
+    probe = ("import sys, os, bagtools.cli\n"
+             "assert 'numpy' not in sys.modules, 'numpy loaded before the CLI set its threads'\n"
+             "print(os.environ.get('OPENBLAS_NUM_THREADS'))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, env=env)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+def test_the_cli_runs_blas_on_one_thread_unless_the_user_says_otherwise() -> None:
+    # OpenBLAS spreading small products over the cores cost slam 60 % more CPU for the same wall time (#44)
+    assert _cli_env(None) == "1"
+    assert _cli_env("2") == "2"
