@@ -1,21 +1,22 @@
 """bagtools: tools over recorded ROS bags (MCAP, rosbag2 sqlite3, ROS 1) and CARMEN logs.
 
-The layers, bottom up (nothing imports upward):
+The layers, bottom up (nothing imports upward or sideways; docs/architecture.md, checked by
+tests/test_architecture.py):
 
 - ``io``: one reader over every bag format (``open_bag``), CARMEN logs included, and decoders to numpy arrays;
 - ``transforms``: MATLAB-style rotations and transforms (quaternions [w x y z]);
 - ``tf``: a time-indexed tf buffer with tf2's semantics (``TfBuffer``), repairs and ``tf echo``;
 - ``dataset``: the streams the algorithms read (scans in recording order, odometry);
-- ``trajectory``: trajectories, TUM files, evo's APE/RPE and the benchmarks' relations metric;
+- ``trajectory``: trajectories, TUM files, evo's APE/RPE, the benchmarks' relations metric, alignment;
 - ``scan_matching``: 2D NDT and correlative (branch and bound) scan matching;
-- ``grid``: log-odds occupancy grids, ray casting and the free space rays saw;
-- ``odometry``: the laser-odometry front end that ``slam``, ``ndt-odom`` and ``localize`` share;
-- ``gridmap``, ``cloudmap``: maps from known poses (``grid``, ``map-cloud``);
-- ``ndtodom``: the ``ndt-odom`` command's pipeline (a bag through the front end, its outputs);
-- ``localize``: where scans are in a map the robot already has (so far the global search, ``GlobalLocalizer``);
-- ``slam``: loop closure, the GTSAM pose graph, the SLAM pipeline and ``eval``;
+- ``cloud``: point clouds as data, voxel filters;
+- ``grid``: log-odds occupancy grids, ray casting, nav2 maps, a bag's grid at known poses;
+- ``odometry``: the laser-odometry front end that ``slam``, ``ndt-odom`` and ``localize`` share, and a bag
+  through it;
+- ``pose_graph``: loop closure (constraint search) and the GTSAM pose graph;
+- the commands: ``baginfo`` (``info``), ``gridmap`` (``grid``), ``cloudmap`` (``map-cloud``), ``ndtodom``
+  (``ndt-odom``), ``slam`` (and ``eval``), ``localize``, ``export``;
 - ``results``: results.mcap writers (to open beside the bag in Foxglove);
-- ``export``: any topic to CSV, NPZ or Parquet;
 - ``batch``: many bags through one command on a Dask cluster;
 - ``cli``: the thin click shell (``bagtools --help``).
 

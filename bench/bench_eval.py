@@ -33,7 +33,7 @@ def _pair(n: int):
 
 
 def _ours(ref, est) -> None:
-    from bagtools.slam.evaluate import evaluate
+    from bagtools.trajectory.evaluate import evaluate
 
     evaluate(est, ref, gap=20, align=True)
 

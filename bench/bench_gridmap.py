@@ -37,7 +37,7 @@ def _grid(bag: Path, out_dir: Path, options: GridMapOptions, write: bool, mcap: 
 _LARGE_MAP = """
 import resource, sys, numpy as np
 from bagtools.grid import OccupancyGrid, render_map_png
-from bagtools.slam.render import render_slam_map_png
+from bagtools.grid.render import render_slam_map_png
 grid = OccupancyGrid(250.0, 200.0, 20.0)
 grid.insert_ray(np.array([5.0, 5.0, 0.0]), np.array([240.0]), np.array([0.7]), max_range=300.0)
 path = np.array([[10.0, 10.0], [200.0, 150.0]])

@@ -149,7 +149,7 @@ def scan_sequence(bag: Path):
     """A simulated bag's scans as the localizer takes them (base frame, recording order), its odometry poses
     (N, 3) and the ground truth (N, 3) at the scan stamps."""
     from bagtools.io import open_bag
-    from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline
+    from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomPipeline
     from bagtools.simtruth import read_ground_truth
     from bagtools.transforms import tform2pose
 
@@ -267,7 +267,7 @@ def _world_to_map(bag: Path, trajectory) -> np.ndarray:
     map): [x, y, theta], the best planar fit of the trajectory onto the bag's /ground_truth."""
     from bagtools.io import open_bag
     from bagtools.simtruth import read_ground_truth
-    from bagtools.slam.evaluate import align_se2
+    from bagtools.trajectory.evaluate import align_se2
     from bagtools.trajectory import Trajectory
     from bagtools.trajectory.metrics import associate
 

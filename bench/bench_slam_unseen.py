@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.slam.evaluate import align_se2
+from bagtools.trajectory.evaluate import align_se2
 from bagtools.trajectory import read_tum
 from bench.bench_slam_benchmark import _run
 from bench.common import Row

@@ -144,7 +144,7 @@ def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Jo
 
 def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.gridmap import GridMapOptions
-    from bagtools.gridmap.options import map_cell_size
+    from bagtools.grid.options import map_cell_size
     from bagtools.trajectory import read_tum
 
     if p["poses"] not in ("tf", "ground-truth"):
@@ -196,7 +196,7 @@ def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Job
 
 
 def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.gridmap.options import map_cell_size
+    from bagtools.grid.options import map_cell_size
     from bagtools.slam import SlamOptions
     from bagtools.trajectory import read_relations
 

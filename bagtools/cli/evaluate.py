@@ -50,7 +50,7 @@ def evaluate(estimate: str, reference: str | None, align: bool, gap: int, relati
       bagtools eval ndt/trajectory.tum ndt/ground_truth.tum --json
     """
     from bagtools.errors import BagtoolsError
-    from bagtools.slam.evaluate import evaluate as evaluate_trajectory
+    from bagtools.trajectory.evaluate import evaluate as evaluate_trajectory
     from bagtools.trajectory import read_relations, read_tum
 
     if reference is None and relations is None:

@@ -50,9 +50,9 @@ SCAN_FRAME_OFFSET_HELP = "Laser pose on the robot base [m, m, rad] when tf lacks
 def cell_size(cell_size_m: float | None, cells_per_metre: float | None, resolution: float | None,
               resolution_in_metres: bool) -> tuple[float, str | None]:
     """(the map cell side (m), the old spelling's note or None) of ``--cell-size``/``--cells-per-metre``/
-    ``--resolution`` (see :func:`bagtools.gridmap.options.map_cell_size`): two of them is a usage error. The caller
+    ``--resolution`` (see :func:`bagtools.grid.options.map_cell_size`): two of them is a usage error. The caller
     says the note once the run has succeeded (a failure stays one line)."""
-    from bagtools.gridmap.options import cell_size_options_given, map_cell_size
+    from bagtools.grid.options import cell_size_options_given, map_cell_size
 
     given = cell_size_options_given(cell_size_m, cells_per_metre, resolution)
     if len(given) > 1:

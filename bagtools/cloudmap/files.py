@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.cloudmap.accumulator import MapCloud
+from bagtools.cloud.accumulator import MapCloud
 
 
 def _packed_rgb(rgb: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from bagtools.cloudmap.accumulator import MapCloud
+from bagtools.cloud.accumulator import MapCloud
 from bagtools.errors import BagtoolsError
 
 HELD_PREFIX = "bagtools-held-"

@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from bagtools.cloudmap.accumulator import MIN_VOXEL_M, MapCloud, PointAccumulator, random_indices
+from bagtools.cloud.accumulator import MIN_VOXEL_M, MapCloud, PointAccumulator, random_indices
 from bagtools.cloudmap.held import HeldCloud, HeldClouds
 from bagtools.cloudmap.refine import CloudRefiner
 from bagtools.dataset import SensorStream

@@ -1,7 +1,7 @@
 """Occupancy-grid maps of a bag's laser scans at known poses (``bagtools grid``)."""
 
-from bagtools.gridmap.options import MAX_GRID_CELLS, GridMapOptions
-from bagtools.gridmap.pipeline import GridMapPipeline, GridMapResult
+from bagtools.grid.options import MAX_GRID_CELLS, GridMapOptions
+from bagtools.grid.pipeline import GridMapPipeline, GridMapResult
 from bagtools.gridmap.writer import GRID_MAP_FILES, write_grid_map
 
 __all__ = [

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from bagtools.grid import nav2_map_files, render_map_png
-from bagtools.gridmap.pipeline import GridMapResult
+from bagtools.grid.pipeline import GridMapResult
 from bagtools.outputs import OutputDir
 from bagtools.results import RESULTS_MCAP, ResultsBag, run_outputs
 

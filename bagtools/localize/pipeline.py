@@ -31,12 +31,12 @@ from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.localize.tracker import (
     AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
 )
-from bagtools.ndtodom.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
+from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
 from bagtools.odometry import FrontEndRun
 from bagtools.progress import progress
 from bagtools.scan_matching import CorrelativeReference
 from bagtools.simtruth import read_ground_truth, read_poses
-from bagtools.slam.evaluate import ape_aligned
+from bagtools.trajectory.evaluate import ape_aligned
 from bagtools.trajectory import ErrorStats, Trajectory, ape_translation
 from bagtools.transforms import pose2tform, se2_between, tform2pose, wrap_to_pi
 

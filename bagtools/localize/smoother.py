@@ -28,7 +28,7 @@ frozen map):
 - revisit factors (:func:`revisit_factors`): a keyframe the map places
   within ``REVISIT_RADIUS_M`` of an older keyframe, at least slam's
   ``min_travel_m`` of path later, matched against the scans around the older
-  one as slam closes a loop (:class:`~bagtools.slam.constraints.LoopClosureSearch`,
+  one as slam closes a loop (:class:`~bagtools.pose_graph.constraints.LoopClosureSearch`,
   slam's defaults), in a window of ``REVISIT_GATE_SIGMAS`` x ``REVISIT_SIGMA``
   around where the map puts it, under the same kernel. The map alone places
   two visits of a place apart by its own errors, which differ with the
@@ -57,9 +57,9 @@ from scipy.sparse.csgraph import connected_components
 
 from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
-from bagtools.slam.backend import UNLINKED_COVARIANCE
-from bagtools.slam.constraints import LoopClosureSearch, LoopOptions
-from bagtools.slam.graph import check_covariance
+from bagtools.pose_graph.backend import UNLINKED_COVARIANCE
+from bagtools.pose_graph.constraints import LoopClosureSearch, LoopOptions
+from bagtools.pose_graph.graph import check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 #: Standard deviations (m, m, rad) of a map match's pose in the graph. The matches' errors are not independent

@@ -12,7 +12,7 @@ from bagtools.grid import Nav2Map, OccupancyGrid
 from bagtools.localize.pipeline import MAP_FRAME, PART_DEG, PART_M, LocalizeResult
 from bagtools.outputs import OutputDir
 from bagtools.results import RESULTS_MCAP, Markers, ResultsBag, run_outputs
-from bagtools.slam.render import render_slam_map_png
+from bagtools.grid.render import render_slam_map_png
 from bagtools.trajectory import tum_text
 
 #: Every file the command may write (any existing one is refused without --force).

@@ -1,6 +1,6 @@
 """Laser odometry by 2D NDT scan matching (``bagtools ndt-odom``)."""
 
-from bagtools.ndtodom.pipeline import (
+from bagtools.odometry.pipeline import (
     INIT_MODES, REFERENCE_MODES, NdtOdomOptions, NdtOdomPipeline, NdtOdomResult, run_front_end,
 )
 from bagtools.ndtodom.plots import render_scan_map_png, render_trajectories_png, scans_in_frame

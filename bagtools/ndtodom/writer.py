@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.ndtodom.pipeline import NdtOdomResult
+from bagtools.odometry.pipeline import NdtOdomResult
 from bagtools.ndtodom.plots import render_scan_map_png, render_trajectories_png
 from bagtools.outputs import OutputDir
 from bagtools.results import RESULTS_MCAP, ResultsBag, run_outputs
@@ -55,7 +55,7 @@ def write_ndt_odom_results(bag: ResultsBag, result: NdtOdomResult) -> None:
     """In the odometry frame: /trajectory (NDT), /odometry and /ground_truth (when the bag had them) as paths,
     /tf (odometry frame -> base at each scan) and /tf_static (base -> laser), the scans at their stamps,
     and /cloud_map: every scan's points at their NDT pose, one per 5 cm voxel, at the laser's height."""
-    from bagtools.cloudmap import MapCloud, voxel_average
+    from bagtools.cloud import MapCloud, voxel_average
     from bagtools.ndtodom.plots import scans_in_frame
 
     s = result.summary

@@ -2,8 +2,8 @@
 
     SlamPipeline(bag, options).run()
         _check_bag()        the scan topic is there (one-line error before any work)
-        _front_end()        laser odometry: every scan registered, keyframes chained (bagtools.ndtodom.run_front_end)
-        _back_end()         keyframes as nodes, loop search, GTSAM optimization (bagtools.slam.backend)
+        _front_end()        laser odometry: every scan registered, keyframes chained (bagtools.odometry.pipeline.run_front_end)
+        _back_end()         keyframes as nodes, loop search, GTSAM optimization (bagtools.pose_graph.backend)
         _trajectories()     every scan's pose: a keyframe's optimized pose, or its keyframe's composed with
                             its match; the front end's alone
         _map()              the occupancy grid at the optimized poses (bagtools.gridmap)
@@ -44,15 +44,15 @@ import numpy as np
 from bagtools.dataset import ScanClock, require_topic
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid
-from bagtools.gridmap import GridMapOptions, GridMapPipeline
-from bagtools.gridmap.options import MAX_RESOLUTION, MIN_RESOLUTION
+from bagtools.grid.options import MAX_RESOLUTION, MIN_RESOLUTION, GridMapOptions
+from bagtools.grid.pipeline import GridMapPipeline
 from bagtools.io import LASERSCAN_TYPES, open_bag
-from bagtools.ndtodom import NdtOdomOptions, NdtOdomResult, run_front_end
+from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomResult, run_front_end
 from bagtools.odometry.steps import FrontEndRun
-from bagtools.slam.backend import BackEndOptions, BackEndResult, build_pose_graph
-from bagtools.slam.constraints import ACCEPTED, LoopOptions
-from bagtools.slam.evaluate import trajectory_errors
+from bagtools.pose_graph.backend import BackEndOptions, BackEndResult, build_pose_graph
+from bagtools.pose_graph.constraints import ACCEPTED, LoopOptions
 from bagtools.trajectory import Relations, Trajectory, read_relations, relation_errors
+from bagtools.trajectory.evaluate import trajectory_errors
 from bagtools.transforms import pose2tform, se2_between, se2_compose, wrap_to_pi
 
 #: The frame name the map is built in by the grid pipeline: not the bag's "map" (see the module docstring).
@@ -129,7 +129,7 @@ class SlamOptions:
 
 
 #: The front end: (bag path, options) -> its result, whose ``front_end`` holds every scan registered
-#: (a :class:`~bagtools.odometry.steps.FrontEndRun`). The default is the laser odometry of bagtools.ndtodom.
+#: (a :class:`~bagtools.odometry.steps.FrontEndRun`). The default is the laser odometry of bagtools.odometry.pipeline.
 FrontEnd = Callable[[Path, SlamOptions], NdtOdomResult]
 
 
@@ -140,7 +140,7 @@ def front_end_options(options: SlamOptions) -> NdtOdomOptions:
 
 
 def laser_odometry(bag_path: Path, options: SlamOptions) -> NdtOdomResult:
-    """The robust laser odometry of :mod:`bagtools.ndtodom` with this run's topic and odometry setting
+    """The robust laser odometry of :mod:`bagtools.odometry.pipeline` with this run's topic and odometry setting
     (keeping the scans when results.mcap will replay them)."""
     return run_front_end(bag_path, front_end_options(options), keep_scans=options.keep_scans)
 

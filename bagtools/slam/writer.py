@@ -11,7 +11,7 @@ from bagtools.grid import nav2_map_files
 from bagtools.outputs import OutputDir
 from bagtools.results import RESULTS_MCAP, Markers, ResultsBag, run_outputs
 from bagtools.slam.pipeline import SLAM_FRAME, SlamResult
-from bagtools.slam.render import render_slam_map_png
+from bagtools.grid.render import render_slam_map_png
 from bagtools.trajectory import tum_text
 
 #: Every file the command may write (any existing one is refused without --force).

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools.cloudmap import MapCloud, PointAccumulator, voxel_average, write_point_cloud
+from bagtools.cloud import MapCloud, PointAccumulator, voxel_average
+from bagtools.cloudmap import write_point_cloud
 from bagtools.io import decode_pointcloud2
 from tests.conftest import TYPESTORE, _header, make_tf, write_bag
 

@@ -8,7 +8,7 @@ import numpy as np
 
 import bagtools.cloudmap.pipeline as pipeline
 from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
-from bagtools.cloudmap.accumulator import MapCloud
+from bagtools.cloud.accumulator import MapCloud
 from bagtools.cloudmap.held import HELD_PREFIX, HeldCloud, HeldClouds
 from tests.conftest import FIXTURES
 

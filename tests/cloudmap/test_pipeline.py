@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, PointAccumulator, random_subset
+from bagtools.cloud import PointAccumulator, random_subset
+from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
 from bagtools.errors import BagtoolsError, TopicError
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 

@@ -214,7 +214,7 @@ def test_map_pictures_of_a_large_map_stay_small_in_memory() -> None:
     script = """
 import resource, numpy as np
 from bagtools.grid import OccupancyGrid, render_map_png
-from bagtools.slam.render import render_slam_map_png
+from bagtools.grid.render import render_slam_map_png
 grid = OccupancyGrid(250.0, 200.0, 20.0)
 grid.insert_ray(np.array([5.0, 5.0, 0.0]), np.array([240.0]), np.array([0.7]), max_range=300.0)
 path = np.array([[10.0, 10.0], [200.0, 150.0]])

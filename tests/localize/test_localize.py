@@ -334,7 +334,7 @@ def test_a_kidnap_in_a_bag_breaks_the_laser_odometry_is_recovered_and_not_smooth
     """The whole command on a bag whose scans jump 2.5 m at scan 120 (carried; the wheels saw nothing): the laser
     odometry cannot match the scan after the jump to the ones before, so the motion no longer bounds where the
     robot is: lost, searched for, recovered within 3 s, and the smoothing is cut there."""
-    from bagtools.ndtodom.pipeline import NdtOdomPipeline, ScanInputs
+    from bagtools.odometry.pipeline import NdtOdomPipeline, ScanInputs
 
     inputs, _, truth = scan_sequence(world["bag"])
     k0 = 120

@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 
 from bagtools.odometry.steps import FrontEndRun
-from bagtools.slam import BackEndOptions, build_pose_graph
-from bagtools.slam.backend import UNLINKED_COVARIANCE
-from bagtools.slam.graph import ODOMETRY
+from bagtools.pose_graph import BackEndOptions, build_pose_graph
+from bagtools.pose_graph.backend import UNLINKED_COVARIANCE
+from bagtools.pose_graph.graph import ODOMETRY
 from bagtools.transforms import se2_between
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bagtools.slam.constraints import (
+from bagtools.pose_graph.constraints import (
     ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOOK_ALIKE, PENDING, SEES_THROUGH, UNCONFIRMED, ConsistencyCheck,
     LoopCandidate, LoopClosureSearch, LoopOptions, voxel_subsample,
 )

@@ -6,7 +6,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from bagtools.slam.graph import LOOP, ODOMETRY, Constraint, PoseGraph, check_covariance
+from bagtools.pose_graph.graph import LOOP, ODOMETRY, Constraint, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose
 
 ODOM_COV = np.diag([0.02**2, 0.02**2, 0.01**2])

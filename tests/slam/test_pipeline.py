@@ -16,8 +16,10 @@ import pytest
 from bagtools.errors import BagtoolsError, TopicError
 from bagtools.grid import read_nav2_map
 from bagtools.odometry.steps import FrontEndRun
-from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, align_se2, build_pose_graph, write_slam
-from bagtools.slam.constraints import ACCEPTED
+from bagtools.pose_graph import build_pose_graph
+from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, write_slam
+from bagtools.trajectory.evaluate import align_se2
+from bagtools.pose_graph.constraints import ACCEPTED
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag

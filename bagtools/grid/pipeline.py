@@ -41,7 +41,7 @@ from bagtools.dataset import (
 )
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid, rasterize_truth, score_map
-from bagtools.gridmap.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
+from bagtools.grid.options import POSES_GROUND_TRUTH, POSES_TF, GridMapOptions
 from bagtools.io import LASERSCAN_TYPES, BagReader, LaserScanArrays, open_bag, read_tf_arrays
 from bagtools.io.decode import MAX_PLAUSIBLE_RANGE_M
 from bagtools.limits import check_memory

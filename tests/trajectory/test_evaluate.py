@@ -7,7 +7,7 @@ import pytest
 from evo.core.geometry import umeyama_alignment
 
 from bagtools.errors import BagtoolsError
-from bagtools.slam.evaluate import align_se2, ape_aligned, gap_errors, trajectory_errors
+from bagtools.trajectory.evaluate import align_se2, ape_aligned, gap_errors, trajectory_errors
 from bagtools.trajectory import Trajectory
 from bagtools.transforms import pose2tform, se2_compose
 

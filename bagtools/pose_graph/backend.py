@@ -6,9 +6,9 @@ system would:
 1. the keyframe becomes a node, placed by its odometry edge (the front end's
    ``T_ref_cur`` and ``covariance`` against the keyframe before it) on the
    current estimate of that one;
-2. :class:`~bagtools.slam.constraints.LoopClosureSearch` proposes older
+2. :class:`~bagtools.pose_graph.constraints.LoopClosureSearch` proposes older
    keyframes within reach, matches them, and
-   :class:`~bagtools.slam.constraints.ConsistencyCheck` accepts or rejects the
+   :class:`~bagtools.pose_graph.constraints.ConsistencyCheck` accepts or rejects the
    matches; accepted ones become loop edges;
 3. the graph is optimized (GTSAM Levenberg-Marquardt) when a loop corrects the
    estimate by more than ``correction_m``/``correction_rad``, or
@@ -24,7 +24,7 @@ system would:
    large residual for the chain's fault, not its own.
    Later searches use the corrected estimate.
 4. when no loop has been accepted for a while, a global search (see
-   :mod:`bagtools.slam.constraints`) matches the keyframe against old maps
+   :mod:`bagtools.pose_graph.constraints`) matches the keyframe against old maps
    anywhere; its best match is followed up at the next keyframes in small
    windows around where it puts them, and enters the graph only with a
    consistent follow-up. The graph's robust loop kernel and the outlier check
@@ -55,11 +55,11 @@ from scipy.sparse.csgraph import dijkstra
 
 from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
-from bagtools.slam.constraints import (
+from bagtools.pose_graph.constraints import (
     ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch,
     LoopOptions,
 )
-from bagtools.slam.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
+from bagtools.pose_graph.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 #: Covariance of the motion between two keyframes the front end did not link (m^2, m^2, rad^2): unknown.
