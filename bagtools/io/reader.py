@@ -10,7 +10,8 @@ not by trust in the suffix. Damage is read around, and said in :attr:`BagReader.
   or summary skipped, a garbled message definition costing only its topic. A
   complete file whose summary agrees with its data opens from the summary, and
   its chunks are checked as they are read: their damage is said then;
-- ROS 1 and sqlite3 bags are read with rosbags; a read error in the middle ends
+- ROS 1 and sqlite3 bags are read with rosbags; a damaged chunk of a ROS 1 bag is skipped (its index, at the
+  end of the file, finds the chunks after it) and said; any other read error in the middle ends
   the stream with a warning, and a message that cannot be decoded is skipped and
   counted;
 - a rosbag2 directory whose metadata.yaml counts no messages, or promises
@@ -123,9 +124,14 @@ def sniff_kind(path: Path) -> str | None:
 class _AnySource:
     """Messages through rosbags' AnyReader (every complete bag)."""
 
+    #: How read_damage is said (MCAP's source says "damaged MCAP").
+    damage_kind = "damaged ROS 1 bag"
+
     def __init__(self, paths: list[Path]) -> None:
+        self.path = paths[0]
         self.reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         self.reader.open()
+        self.read_damage: list[str] = []  # damaged ROS 1 chunks read past: what was skipped
         self.topics = _topics_of(self.reader.connections, lambda c: c.msgcount)
         self.cdr_topics = {c.topic for c in self.reader.connections
                            if getattr(c.ext, "serialization_format", None) == "cdr"}  # rosbag2's; ROS 1 has its own
@@ -136,8 +142,40 @@ class _AnySource:
         conns = [c for c in self.reader.connections if topics is None or c.topic in topics]
         if not conns:
             return
-        for conn, t_ns, raw in self.reader.messages(connections=conns):
-            yield RawRecord(conn.topic, conn.msgtype, t_ns, raw, getattr(conn.ext, "callerid", None) or "")
+        start = None
+        while True:
+            n = 0
+            try:
+                for conn, t_ns, raw in self.reader.messages(connections=conns, start=start):
+                    n += 1
+                    yield RawRecord(conn.topic, conn.msgtype, t_ns, raw, getattr(conn.ext, "callerid", None) or "")
+                return
+            except Rosbag1ReaderError:
+                start = self._past_damaged_chunk(conns, start, n)
+                if start is None:
+                    raise
+
+    def _past_damaged_chunk(self, conns: list[Connection], start: int | None, n_read: int) -> int | None:
+        """Where to read on after a damaged chunk of a ROS 1 bag: the stamp after the last message of the chunk
+        that holds the next message (the ``n_read``-th of ``conns`` from ``start``), whose reading failed; what is
+        skipped is added to ``read_damage``. None when this is not one ROS 1 file (a rosbag2 file's damage ends the
+        read) or no message is left after the chunk. A ROS 1 bag's index lies at its end, apart from the chunks:
+        every chunk can be found without reading the ones before it."""
+        readers = self.reader.readers
+        if len(readers) != 1 or not hasattr(readers[0], "chunk_infos"):
+            return None
+        indexes = readers[0].indexes
+        entries = [e for e in heapq.merge(*(indexes[c.id] for c in conns)) if start is None or e.time >= start]
+        if n_read >= len(entries):
+            return None
+        failed = entries[n_read]
+        end = max(e.time for index in indexes.values() for e in index if e.chunk_pos == failed.chunk_pos)
+        skipped = [e for e in entries[n_read:] if e.time <= end]
+        if len(skipped) == len(entries) - n_read:  # nothing after it: the read ends here, and says so
+            return None
+        self.read_damage.append(f"the chunk at byte {failed.chunk_pos} cannot be read: {len(skipped)} message(s) "
+                                f"over {(end - failed.time) / 1e9:.1f} s skipped, read on past it")
+        return end + 1
 
     def deserializer(self) -> Callable[[RawRecord], Any]:
         return lambda rec: self.reader.deserialize(rec.raw, rec.msgtype)
@@ -526,14 +564,15 @@ class BagReader:
             damage = self._warn_read_damage()
         if n == 0 and damage:
             what = "no message" if wanted is None else f"no message of {', '.join(sorted(wanted))}"
-            raise BagError(f"damaged MCAP: {what} could be read (all of it lay in damaged chunks; the rest of the bag "
+            kind = getattr(self._source, "damage_kind", "damaged MCAP")
+            raise BagError(f"{kind}: {what} could be read (all of it lay in damaged chunks; the rest of the bag "
                            f"may be intact): {damage[0]}", self.path)
 
     def _warn_read_damage(self) -> list[str]:
         """Say the damage met in MCAP chunks that were first checked while being read; return it."""
-        met = [(source.path, d) for source in self.storage_sources() for d in getattr(source, "read_damage", ())]
-        for path, damage in met:
-            self._warn_once(f"{path}: damaged MCAP: {damage}")
+        met = [(source, d) for source in self.storage_sources() for d in getattr(source, "read_damage", ())]
+        for source, damage in met:
+            self._warn_once(f"{source.path}: {getattr(source, 'damage_kind', 'damaged MCAP')}: {damage}")
         return [damage for _, damage in met]
 
     def deserialize(self, rec: RawRecord) -> Record:
