@@ -34,8 +34,12 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    contradict each other's free space (:mod:`bagtools.grid.freespace`): the
    score counts points on walls, not walls standing where the other map's
    laser saw through. A look-alike (a room of the same shape furnished
-   otherwise, a corridor a few metres along) can score as well as the place,
-   but puts walls in both maps' open space; a world that changed between the
+   otherwise, a corridor a few metres along) can score as well as the place.
+   In a wide window (``wide_window_m`` and more) the search asks for it: a
+   window where another place scores ``global_unique_ratio`` of the best is
+   refused (``LOOK_ALIKE``), as the global search's is; a second match cannot
+   tell the two apart, since a corridor's look-alike shifts every match of it
+   alike. A look-alike also puts walls in both maps' open space; a world that changed between the
    visits (a door shut, a person passing) contradicts one map only. So a match
    where more than ``max_seen_through`` of each map's points lie where the
    other saw through is refused (``SEES_THROUGH``).
@@ -547,8 +551,9 @@ class LoopClosureSearch:
             # estimate's uncertainty says little of the places outside it: such a match is not followed up
             capped = bool(window[0] < COVER_SIGMAS * sigma[0] or window[2] < COVER_SIGMAS * sigma[1])
             cand.look_alike = len(peaks) > 1 or (kind != GLOBAL and capped)
-            if kind != GLOBAL and peaks:  # a local match may still be confirmed by an independent one
-                peaks = peaks[:1]
+            # Another place scoring as well is refused, local or global: an independent second match cannot
+            # tell the two apart (a corridor's look-alike shifts every match of it alike, and the chains between
+            # them allow metres after a long loop), so a pair of look-alikes would enter the graph and bend it.
             if len(peaks) != 1:  # none: nothing scores global_min_score (the search is not run again for why)
                 too_few = min(len(current), old_map.correlative.n_points) < MIN_SCAN_POINTS
                 cand.status = LOOK_ALIKE if peaks else TOO_FEW_POINTS if too_few else LOW_SCORE

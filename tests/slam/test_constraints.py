@@ -132,13 +132,18 @@ def test_a_global_match_in_a_corridor_is_a_look_alike(junction: bool) -> None:
 
 
 @pytest.mark.parametrize("junction", [False, True])
-def test_a_wide_local_window_says_when_it_holds_a_look_alike(junction: bool) -> None:
-    """A local match searched in a window as wide as a corridor's look-alikes are apart is matched, and says
-    whether another place of its window scores as well; a narrow window is not asked."""
+def test_a_wide_local_window_that_holds_a_look_alike_is_refused(junction: bool) -> None:
+    """A local match searched in a window as wide as a corridor's look-alikes are apart asks whether another place
+    of its window scores as well, and is refused when one does (no second match could tell the two apart: the
+    look-alike shifts every match of the corridor alike); a narrow window is not asked."""
     search, poses = _corridor_search(junction)
     wide = search.match(10, 30, poses, (1.0, 0.1))
     assert wide.window[0] >= search.options.wide_window_m
-    assert wide.T_old_new is not None and wide.look_alike is (not junction)
+    assert wide.look_alike is (not junction)
+    if junction:  # the junction makes the place unique
+        assert wide.T_old_new is not None and wide.status != LOOK_ALIKE
+    else:
+        assert wide.T_old_new is None and wide.status == LOOK_ALIKE
     narrow = search.match(10, 30, poses, (0.1, 0.03))
     assert narrow.window[0] < search.options.wide_window_m
     assert narrow.T_old_new is not None and narrow.look_alike is None
