@@ -89,19 +89,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.odometry.motion import (  # the motion model, shared with the localizer
-    CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO, MOTION_MEMORY_S, PRIOR_WEIGHT_DEFAULT, STAMP_JITTER_S, VELOCITY_SPAN_S,
+    CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO, MOTION_MEMORY_S, STAMP_JITTER_S, VELOCITY_SPAN_S,
     odometry_sd, steady_velocity_sd,
+)
+from bagtools.odometry.options import FrontEndOptions, normalized_score
+from bagtools.odometry.prior import (
+    COVARIANCE_FLOOR, CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
 )
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
-from bagtools.scan_matching.grid import CELL_MODELS
 from bagtools.transforms import wrap_to_pi
 # single poses in the loop body, tens of calls per scan: without numpy's per-call overhead on 3-vectors
 from bagtools.transforms.planar import se2_between_fast as _between
 from bagtools.transforms.planar import se2_compose_fast as _compose
 
-GUESSES = ("odom", "constant-velocity", "zero")
 
 # Counter keys (summary.json) and their one-line explanations (warnings).
 SEARCHED = "searched"
@@ -134,17 +136,6 @@ AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
 #: keyframe's (``ScanStep.trusted`` is False): a robot carried away matches nothing of it (a fallback, at 0.1 of the
 #: typical score on simulated kidnaps), while a scan merely harder to match scores 0.6 of it or more.
 CONTINUITY_SCORE_RATIO = 0.5
-#: What overruling the odometry costs, in normalized score (see _Prior).
-OUTLIER_COST = 0.25
-#: Without odometry: what overruling constant velocity's narrow spread (motion.CV_STEADY_*) costs.
-CV_OUTLIER_COST = 0.12
-#: A result farther than this (squared Mahalanobis, 3 sigma in 3 dof ~ 14) from the prior is searched for.
-PRIOR_GATE2 = 14.0
-#: A wheeled robot's step runs along an arc: its sideways offset from the chord has this spread (m, share of the step).
-LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
-#: Beyond what the robot can do in a step (max speed and turn rate x time), the prior's cost grows by one per
-#: this much more (m, rad).
-REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
 #: A scan of fewer points (voxel-filtered) is not searched beyond the prior's window: a dozen returns fit somewhere in
 #: any large window as well as at the place, and could not overrule the motion model.
 MIN_WIDE_POINTS = 20
@@ -179,180 +170,10 @@ SHORT_STEP_RATIO = 0.25
 BEYOND_REACH_GAIN = 0.2
 
 
-@dataclass(frozen=True)
-class FrontEndOptions:
-    """Settings of :class:`LaserOdometry` (defaults hold on the real logs and on simulated bags).
-
-    ``init``: which guess NDT starts from first ("auto": odometry when given,
-    else constant velocity). ``search``: allow the grid search. ``reference``:
-    "keyframe" or "previous" (every scan is a keyframe). ``wheeled``: the scans
-    ride on a wheeled robot, whose steps run along arcs (False for a handheld
-    or flying laser, which can move sideways). ``refine``: the finer-grid
-    refinement of large-cell scenes (step 4 of the module docstring).
-    """
-
-    init: str = "auto"
-    search: bool = True
-    reference: str = "keyframe"
-    cell_size_m: float = 1.0
-    cell_model: str = "widened"
-    min_score: float = 0.1
-    trust_score_ratio: float = 0.75
-    keyframe_distance_m: float = 0.5
-    keyframe_angle_rad: float = 0.35
-    keyframe_score_ratio: float = 0.7
-    max_speed_mps: float = 1.5
-    max_turn_rate_radps: float = 2.0
-    max_accel_mps2: float = 1.0
-    max_turn_accel_radps2: float = 2.0
-    max_gap_s: float = 1.5
-    search_resolution_m: float = 0.1
-    search_angular_resolution_rad: float = 0.005
-    submap_keyframes: int = 5
-    prior_weight: float = PRIOR_WEIGHT_DEFAULT
-    voxel_m: float = 0.2
-    wheeled: bool = True
-    max_iterations: int = 100
-    refine: bool = True
-
-    def __post_init__(self) -> None:
-        if self.init not in ("auto", *GUESSES):
-            raise ValueError(f"init must be auto or one of {', '.join(GUESSES)}, got {self.init!r}")
-        if self.reference not in ("keyframe", "previous"):
-            raise ValueError(f"reference must be keyframe or previous, got {self.reference!r}")
-        if self.cell_model not in CELL_MODELS:
-            raise ValueError(f"cell_model must be one of {', '.join(CELL_MODELS)}, got {self.cell_model!r}")
-        for name in ("cell_size_m", "max_speed_mps", "max_turn_rate_radps", "max_accel_mps2", "max_turn_accel_radps2",
-                     "max_gap_s", "search_resolution_m", "search_angular_resolution_rad", "keyframe_distance_m",
-                     "keyframe_angle_rad"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value}")
-        if not 0.0 <= self.min_score <= 1.0 or not 0.0 <= self.trust_score_ratio <= 1.0:
-            raise ValueError("min_score and trust_score_ratio must be in [0, 1]")
-
-
-#: The scans are voxel-filtered at this share of the NDT cell size.
-VOXEL_PER_CELL = 0.2
-#: cell_size_for: the cell is this share of the 90th percentile of the ranges, within the limits.
-CELL_PER_RANGE, MIN_AUTO_CELL_M, MAX_AUTO_CELL_M = 1.0 / 6.0, 0.5, 1.0
-
-
-def cell_size_for(scans_points: list[np.ndarray]) -> float:
-    """An NDT cell size (m) suited to the scans (each (N,2) in its sensor's frame): a sixth of the 90th
-    percentile range, within 0.5 m (a small room) and 1 m (a corridor seen 20 m deep)."""
-    sample = scans_points[:: max(1, len(scans_points) // 50)]
-    ranges = np.concatenate([np.hypot(p[:, 0], p[:, 1]) for p in sample]) if sample else np.zeros(0)
-    if ranges.size == 0:
-        return MIN_AUTO_CELL_M
-    return float(np.clip(CELL_PER_RANGE * np.percentile(ranges, 90), MIN_AUTO_CELL_M, MAX_AUTO_CELL_M))
-
-
-def normalized_score(score: float, n_points: int) -> float:
-    """NDT score / its maximum (4 grids x points): in [0, 1] whatever the beam count."""
-    return score / (4.0 * n_points) if n_points > 0 else 0.0
-
-
-#: The NDT Hessian's inverse is floored by this (m^2, m^2, rad^2): points are not independent.
-COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
 #: Guesses closer than this to a result (m, rad) lie in its basin: NDT from them would end there too.
 BASIN_M, BASIN_RAD = 0.15, 0.1
 #: Two results closer than this (m, rad) agree.
 AGREE_M, AGREE_RAD = 0.05, 0.02
-
-
-def ndt_covariance(hessian: np.ndarray, prior_information: np.ndarray | None = None) -> np.ndarray:
-    """Covariance (3,3) of an NDT match from the Hessian of its cost and the information of its prior.
-
-    The Hessian's negative eigenvalues (a match that ends on a ridge of the
-    score in some direction) are taken as no information there, not as
-    negative information, so the prior still bounds that direction. The
-    inverse is taken on the positive eigenvalues of the sum (a direction
-    neither constrains gets a large variance), plus :data:`COVARIANCE_FLOOR`.
-    """
-    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
-    information = (vectors * np.maximum(values, 0.0)) @ vectors.T
-    if prior_information is not None:
-        information = information + prior_information
-    values, vectors = np.linalg.eigh(information)
-    inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
-    return (vectors * inverse) @ vectors.T + COVARIANCE_FLOOR
-
-
-@dataclass
-class _Match:
-    pose: np.ndarray  # in the keyframe's base frame
-    score: float
-    covariance: np.ndarray
-    source: str
-
-
-@dataclass(frozen=True)
-class _Prior:
-    """The expected pose in the keyframe frame (3,) and its standard deviations (3,) (m, m, rad).
-
-    With ``wide`` (another prior: what the robot can have done), the prior is a
-    mixture: usually ``mean``/``sd``, rarely anything ``wide`` allows (wheel
-    odometry that slipped, or a corrupt sample). A candidate's cost is then the
-    cheaper of the two explanations, the wide one paying OUTLIER_COST (in
-    normalized score) for its rarity: the scans must be that much better
-    aligned to overrule the odometry.
-
-    With ``origin`` (the previous scan's pose, same frame), a wheeled robot's
-    motion model adds its cost: a step from ``origin`` runs along an arc, so
-    its sideways offset from the chord at half its turn is unlikely (see
-    LATERAL_SD_M). Odometry's steps follow an arc already and have no origin.
-
-    With ``reach`` (the previous scan's pose, the farthest the robot can move
-    and turn since it: max speed and turn rate times the time step), a step
-    beyond it costs steeply (REACH_SD_M, REACH_SD_RAD per unit): a scene that
-    repeats a few metres away must not pull the robot faster than it can go.
-    """
-
-    mean: np.ndarray
-    sd: np.ndarray
-    weight: float = PRIOR_WEIGHT_DEFAULT
-    wide: _Prior | None = None
-    outlier_cost: float = 0.0
-    kind: str = "kinematic"
-    origin: np.ndarray | None = None
-    reach: tuple[np.ndarray, float, float] | None = None
-
-    def mahalanobis2(self, pose: np.ndarray) -> float:
-        d = _between(self.mean, pose)
-        cost = float((d[0] / self.sd[0]) ** 2 + (d[1] / self.sd[1]) ** 2 + (d[2] / self.sd[2]) ** 2)
-        if self.origin is not None:
-            step = _between(self.origin, pose)
-            half = 0.5 * step[2]
-            sideways = step[1] * math.cos(half) - step[0] * math.sin(half)
-            sd = LATERAL_SD_M + LATERAL_SD_RATIO * math.hypot(step[0], step[1])
-            cost += (sideways / sd) ** 2
-        if self.reach is not None:
-            start, max_m, max_rad = self.reach
-            step = _between(start, pose)
-            cost += (max(math.hypot(step[0], step[1]) - max_m, 0.0) / REACH_SD_M) ** 2
-            cost += (max(abs(step[2]) - max_rad, 0.0) / REACH_SD_RAD) ** 2
-        return cost
-
-    def cost(self, pose: np.ndarray) -> float:
-        """-2 log of the prior density relative to its peak (squared Mahalanobis for one Gaussian)."""
-        narrow = self.mahalanobis2(pose)
-        if self.wide is None:
-            return narrow
-        return min(narrow, self.wide.cost(pose) + self.outlier_cost / self.weight)
-
-    def objective(self, match: _Match) -> float:
-        return match.score - self.weight * self.cost(match.pose)
-
-    def component(self, pose: np.ndarray) -> _Prior:
-        """The Gaussian that explains ``pose`` (the narrow one, or the wide one when that is cheaper)."""
-        if self.wide is None or self.cost(pose) >= self.mahalanobis2(pose):
-            return self
-        return self.wide.component(pose)
-
-    def information(self, n_points: int) -> np.ndarray:
-        """This Gaussian as information on the raw NDT score of ``n_points`` points (see :func:`match_scans`)."""
-        return 8.0 * n_points * self.weight * np.diag(1.0 / self.sd**2)
 
 
 @dataclass
@@ -455,7 +276,7 @@ class LaserOdometry:
         if best.score < opts.min_score:
             self.counts[FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
-            best = _Match(_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
+            best = Match(_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
         elif self._refine_cell_m is not None:
             best = self._refine(full, kf, best)
         pose = _compose(kf.pose, best.pose)
@@ -495,19 +316,19 @@ class LaserOdometry:
         return {first: guesses[first]} | {k: v for k, v in guesses.items() if k != first}
 
     def _ndt(self, points: np.ndarray, reference: NdtReference, initial: np.ndarray, source: str,
-             prior: _Prior) -> _Match:
+             prior: MotionPrior) -> Match:
         """NDT from ``initial`` with the prior's component there as a MAP term (a corridor keeps the prior's position)."""
         gaussian = prior.component(initial)
         info = gaussian.information(len(points))
         result = match_scans(points, reference, initial_pose=initial, max_iterations=self.options.max_iterations,
                              prior=(gaussian.mean, info))
         score = normalized_score(result.score, result.n_points) if result.score > 0 else 0.0
-        return _Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian, info), source)
+        return Match(np.asarray(result.pose, dtype=np.float64), score, ndt_covariance(result.hessian, info), source)
 
     def _ndt_from_guesses(self, points: np.ndarray, kf: _Keyframe, guesses: dict[str, np.ndarray],
-                          prior: _Prior) -> list[_Match]:
+                          prior: MotionPrior) -> list[Match]:
         """NDT from the first guess, then from every other guess outside the basins of the results so far."""
-        matches: list[_Match] = []
+        matches: list[Match] = []
         for guess in guesses.values():
             initial = _between(kf.pose, guess)
             if any(_close(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
@@ -515,7 +336,7 @@ class LaserOdometry:
             matches.append(self._ndt(points, kf.ndt, initial, "ndt", prior))
         return matches
 
-    def _prior(self, last_pose: np.ndarray, dt: float, guesses: dict[str, np.ndarray], kf: _Keyframe) -> _Prior:
+    def _prior(self, last_pose: np.ndarray, dt: float, guesses: dict[str, np.ndarray], kf: _Keyframe) -> MotionPrior:
         """Where the scan should be before matching: the odometry's motion (its noise grows with the motion),
         else constant velocity (its uncertainty grows with the time step: the robot may have changed its speed)."""
         opts = self.options
@@ -525,7 +346,7 @@ class LaserOdometry:
         sd_theta = CV_NOISE_RAD + 0.5 * opts.max_turn_accel_radps2 * dt * dt + CV_NOISE_RATIO * abs(float(motion[2]))
         last = _between(kf.pose, last_pose)
         origin = last if opts.wheeled else None
-        kinematic = _Prior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
+        kinematic = MotionPrior(_between(kf.pose, guesses["constant-velocity"]), np.array([sd_xy, sd_xy, sd_theta]),
                            opts.prior_weight, origin=origin,
                            reach=(last, opts.max_speed_mps * reach_s, opts.max_turn_rate_radps * reach_s))
         if "odom" not in guesses and len(self._scores) < 2:  # no speed known yet: anything the robot can do
@@ -533,15 +354,15 @@ class LaserOdometry:
         if "odom" not in guesses:
             # A robot mostly keeps its speed: constant velocity as a narrow prior, with what the robot can do
             # (accelerate, stop, start turning) as the rarer alternative.
-            return _Prior(kinematic.mean, np.minimum(steady_velocity_sd(motion), kinematic.sd),
+            return MotionPrior(kinematic.mean, np.minimum(steady_velocity_sd(motion), kinematic.sd),
                           opts.prior_weight, wide=kinematic, outlier_cost=CV_OUTLIER_COST, kind="constant velocity",
                           origin=origin)
-        return _Prior(_between(kf.pose, guesses["odom"]), odometry_sd(_between(last_pose, guesses["odom"])),
+        return MotionPrior(_between(kf.pose, guesses["odom"]), odometry_sd(_between(last_pose, guesses["odom"])),
                       opts.prior_weight,
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
-    def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[_Match], best: _Match,
-                prior: _Prior) -> tuple[_Match, bool]:
+    def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[Match], best: Match,
+                prior: MotionPrior) -> tuple[Match, bool]:
         """(the winner, whether the step is ambiguous): ``best``, unless a match in another place is within
         CONTEST_MARGIN of it; then the finer grid's score less the cost under the robot's reach (the prior's wide
         part) decides between them
@@ -569,7 +390,7 @@ class LaserOdometry:
         if winner is best:
             return best, False
         # the whole scan's fine field vouches for it, where its voxel-filtered score may not (far returns on new walls)
-        return _Match(winner.pose, max(winner.score, fine[order[0]]), winner.covariance, winner.source), False
+        return Match(winner.pose, max(winner.score, fine[order[0]]), winner.covariance, winner.source), False
 
     def _fine_score(self, points: np.ndarray, kf: _Keyframe, pose: np.ndarray) -> float:
         """The best likelihood-field score (in [0, 1]) of ``points`` on the keyframe's submap at
@@ -580,7 +401,7 @@ class LaserOdometry:
                                 angular_resolution_rad=self.options.search_angular_resolution_rad)
         return grid.score if grid.ok else 0.0
 
-    def _needs_search(self, matches: list[_Match], best: _Match, dt: float, prior: _Prior) -> bool:
+    def _needs_search(self, matches: list[Match], best: Match, dt: float, prior: MotionPrior) -> bool:
         """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
         prior finds unlikely."""
         if dt > self.options.max_gap_s:
@@ -602,7 +423,7 @@ class LaserOdometry:
         share = self.options.trust_score_ratio if ratio is None else ratio
         return max(self.options.min_score, share * typical)
 
-    def _search_window(self, prior: _Prior, dt: float) -> tuple[float, float, float]:
+    def _search_window(self, prior: MotionPrior, dt: float) -> tuple[float, float, float]:
         """The prior's 3-sigma window (x_m, y_m, theta_rad), within what the robot can do in ``dt``."""
         opts = self.options
         reach_s = dt + STAMP_JITTER_S
@@ -610,7 +431,7 @@ class LaserOdometry:
         half_theta = float(np.clip(SEARCH_SIGMAS * prior.sd[2], 0.1, min(opts.max_turn_rate_radps * reach_s, math.pi)))
         return half_xy, half_xy, half_theta
 
-    def _search(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float) -> _Match | None:
+    def _search(self, points: np.ndarray, kf: _Keyframe, prior: MotionPrior, dt: float) -> Match | None:
         """Grid search over the prior's window, then NDT."""
         opts = self.options
         if kf.correlative is None:
@@ -622,8 +443,8 @@ class LaserOdometry:
             return None
         return self._ndt(points, kf.ndt, np.asarray(grid.pose, dtype=np.float64), "search", prior)
 
-    def _search_wide(self, points: np.ndarray, kf: _Keyframe, prior: _Prior, dt: float,
-                     matches: list[_Match]) -> list[_Match]:
+    def _search_wide(self, points: np.ndarray, kf: _Keyframe, prior: MotionPrior, dt: float,
+                     matches: list[Match]) -> list[Match]:
         """Search what the robot can have done (``prior.wide``'s window) against a larger submap: every distinct
         correlative peak and every match so far, refined by NDT on that submap, for the prior to weigh."""
         opts = self.options
@@ -639,7 +460,7 @@ class LaserOdometry:
         n_turns = self._turn_starts()
         starts += [(prior.mean + np.array([0.0, 0.0, 2.0 * BASIN_RAD * k]), "prior")
                    for k in range(-n_turns, n_turns + 1) if k != 0]  # k = 0: the guesses' NDT is in matches
-        refined: list[_Match] = []
+        refined: list[Match] = []
         for initial, source in starts:
             if any(_close(initial, m.pose, AGREE_M, AGREE_RAD) for m in refined):
                 continue
@@ -684,13 +505,13 @@ class LaserOdometry:
         """A time step under SHORT_STEP_RATIO of the recent typical one: its stamp is suspect."""
         return bool(self._steps_s) and dt < SHORT_STEP_RATIO * self._typical_step()
 
-    def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, last: np.ndarray, best: _Match) -> _Match | None:
+    def _search_beyond_reach(self, points: np.ndarray, kf: _Keyframe, last: np.ndarray, best: Match) -> Match | None:
         """The best match in the largest window around ``last`` (the previous scan's pose in the keyframe's frame:
         no motion, as nothing else is known), on the larger submap, with no reach and no preference (see
         BEYOND_REACH_GAIN); None when none scores well enough to be believed."""
         opts = self.options
         ndt, correlative = self._wide_reference(kf)
-        free = _Prior(last, np.array([MAX_SEARCH_M, MAX_SEARCH_M, math.pi]), opts.prior_weight)
+        free = MotionPrior(last, np.array([MAX_SEARCH_M, MAX_SEARCH_M, math.pi]), opts.prior_weight)
         peaks = match_scans_grid_peaks(points, correlative, initial_pose=last,
                                        search_range=(MAX_SEARCH_M, MAX_SEARCH_M, math.pi),
                                        angular_resolution_rad=opts.search_angular_resolution_rad,
@@ -711,7 +532,7 @@ class LaserOdometry:
                        CorrelativeReference.from_points(points, resolution_m=opts.search_resolution_m))
         return kf.wide
 
-    def _refine(self, points: np.ndarray, kf: _Keyframe, best: _Match) -> _Match:
+    def _refine(self, points: np.ndarray, kf: _Keyframe, best: Match) -> Match:
         """``best`` refined by NDT on the keyframe's submap with the finer cells (``points``: the whole scan)."""
         if kf.fine is None:
             kf.fine = NdtReference.from_points(kf.points, self._refine_cell_m, self.options.cell_model)
@@ -720,9 +541,9 @@ class LaserOdometry:
         if result.score <= 0 or not _close(best.pose, pose, REFINE_MAX_M, REFINE_MAX_RAD):
             return best
         pose[:2] = best.pose[:2] + _constrained(pose[:2] - best.pose[:2], np.asarray(result.hessian)[:2, :2])
-        return _Match(pose, best.score, best.covariance, best.source)
+        return Match(pose, best.score, best.covariance, best.source)
 
-    def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: _Prior, best: _Match) -> None:
+    def _check(self, last: ScanStep, pose: np.ndarray, dt: float, prior: MotionPrior, best: Match) -> None:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
         step = _between(last.pose, pose)
         if prior.kind == "odometry" and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
@@ -730,7 +551,7 @@ class LaserOdometry:
         if np.hypot(step[0], step[1]) > 2.0 * self.options.max_speed_mps * dt + 0.1:
             self.counts[TOO_FAST] += 1
 
-    def _is_new_keyframe(self, match: _Match) -> bool:
+    def _is_new_keyframe(self, match: Match) -> bool:
         opts = self.options
         kf = self._keyframe
         if opts.reference == "previous" or match.source == "fallback":

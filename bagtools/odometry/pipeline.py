@@ -30,7 +30,8 @@ from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry, open_bag,
 )
-from bagtools.odometry.frontend import GUESSES, VOXEL_PER_CELL, FrontEndOptions, LaserOdometry, cell_size_for
+from bagtools.odometry.frontend import LaserOdometry
+from bagtools.odometry.options import GUESSES, VOXEL_PER_CELL, FrontEndOptions, cell_size_for
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.scan_matching import MIN_SCAN_POINTS
 from bagtools.scan_matching.grid import CELL_MODELS
@@ -61,14 +62,14 @@ class NdtOdomOptions:
     has it, else constant velocity). ``search``: allow the grid search when a
     guess cannot be trusted. ``use_odometry``: False ignores the bag's wheel
     odometry. ``cell_size_m``: NDT cell side (m), None for one suited to the
-    scans (:func:`~bagtools.odometry.frontend.cell_size_for`). ``cell_model``: 'widened'
+    scans (:func:`~bagtools.odometry.options.cell_size_for`). ``cell_model``: 'widened'
     (see :mod:`bagtools.scan_matching.grid`) or 'paper'. ``min_score``: normalized score
     in [0, 1] below which a match falls back to its guess.
     ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
     overriding (or standing in for) tf. ``max_speed_mps`` and
     ``max_turn_rate_radps``: what the robot can do (bounds constant velocity
     and the search). ``wheeled``: False for a handheld or flying laser (its
-    steps need not run along arcs, see :class:`~bagtools.odometry.frontend.FrontEndOptions`).
+    steps need not run along arcs, see :class:`~bagtools.odometry.options.FrontEndOptions`).
     """
 
     topic: str = "/scan"

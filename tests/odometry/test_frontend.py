@@ -174,24 +174,24 @@ def test_csail_without_odometry_does_not_diverge(csail_scans_run) -> None:
 
 def test_a_wheeled_robot_does_not_step_sideways() -> None:
     """The kinematic prior's arc term: a step along the arc costs nothing sideways, a sideways jump costs much."""
-    from bagtools.odometry.frontend import _Prior
+    from bagtools.odometry.prior import MotionPrior
 
-    prior = _Prior(np.array([1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0]), origin=np.zeros(3))
+    prior = MotionPrior(np.array([1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0]), origin=np.zeros(3))
     turn = 0.6
     on_arc = np.array([np.cos(turn / 2), np.sin(turn / 2), turn])  # 1 m along an arc turning 0.6 rad
     sideways = np.array([1.0, -1.0, 0.0])
-    plain = _Prior(prior.mean, prior.sd)
+    plain = MotionPrior(prior.mean, prior.sd)
     assert prior.mahalanobis2(on_arc) - plain.mahalanobis2(on_arc) < 1e-9
     assert prior.mahalanobis2(sideways) - plain.mahalanobis2(sideways) > 25.0
 
 
 def test_a_step_beyond_what_the_robot_can_do_costs_steeply() -> None:
     """The kinematic prior's reach: within max speed x time nothing is added; 0.15 m or 0.15 rad beyond, 9 units."""
-    from bagtools.odometry.frontend import REACH_SD_M, REACH_SD_RAD, _Prior
+    from bagtools.odometry.prior import REACH_SD_M, REACH_SD_RAD, MotionPrior
 
     start = np.array([0.5, 0.2, 0.3])
-    prior = _Prior(start, np.array([10.0, 10.0, 10.0]), reach=(start, 2.0, 1.0))
-    plain = _Prior(prior.mean, prior.sd)
+    prior = MotionPrior(start, np.array([10.0, 10.0, 10.0]), reach=(start, 2.0, 1.0))
+    plain = MotionPrior(prior.mean, prior.sd)
 
     def ahead(d: float, turn: float) -> np.ndarray:
         return np.array([start[0] + d * np.cos(start[2]), start[1] + d * np.sin(start[2]), start[2] + turn])
@@ -244,7 +244,7 @@ def test_csail_without_odometry_holds_from_other_first_scans(csail_scans_run, fi
     a mirror image or a half-seen room matches nearly as well on the 1 m NDT cells): no step goes wrong by half a
     metre or 30 degrees, and the turn into scan 67 (taken 27 degrees wrong from these starts before the fine grid
     decided such contests) is within 5 degrees."""
-    from bagtools.odometry.frontend import cell_size_for
+    from bagtools.odometry.options import cell_size_for
 
     steps = csail_scans_run.front_end.steps
     truth = csail_scans_run.ground_truth
@@ -263,7 +263,7 @@ def test_csail_without_odometry_holds_from_other_first_scans(csail_scans_run, fi
 def test_csail_half_the_scans_without_odometry_warns_of_ambiguous_matches(csail_scans_run) -> None:
     """Every other scan (2 m and up to 130 degrees apart, with a 180-degree laser): many steps could be either of
     two places, and the run says so; at the log's own rate it does not."""
-    from bagtools.odometry.frontend import cell_size_for
+    from bagtools.odometry.options import cell_size_for
 
     assert not any("almost equally well" in w for w in csail_scans_run.summary["warnings"])
     assert csail_scans_run.summary["ambiguous"] <= 8

@@ -221,7 +221,7 @@ def test_real_csail_log_without_odometry_from_later_first_scans(csail_scans_step
     before the fine grid decided such contests): SLAM's map is as right as from the first scan."""
     from bagtools.ndtodom import NdtOdomOptions
     from bagtools.odometry import LaserOdometry
-    from bagtools.odometry.frontend import cell_size_for
+    from bagtools.odometry.options import cell_size_for
 
     bag, steps = csail_scans_steps
     front = LaserOdometry(NdtOdomOptions(use_odometry=False).front_end(cell_size_for([s.points_base for s in steps])))
