@@ -37,7 +37,7 @@ import tempfile
 from pathlib import Path
 
 from bagtools.io.carmen import write_flaser_log
-from bagtools.pose_graph.constraints import SEES_THROUGH
+from bagtools.pose_graph.loops import SEES_THROUGH
 from bagtools.trajectory import read_relations, read_tum, relation_errors
 from bench.common import Row, bag_halves
 

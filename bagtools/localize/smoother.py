@@ -58,7 +58,8 @@ from scipy.sparse.csgraph import connected_components
 from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.pose_graph.backend import UNLINKED_COVARIANCE
-from bagtools.pose_graph.constraints import LoopClosureSearch, LoopOptions
+from bagtools.pose_graph.constraints import LoopClosureSearch
+from bagtools.pose_graph.loops import LoopOptions
 from bagtools.pose_graph.graph import check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 

@@ -8,7 +8,7 @@ system would:
    current estimate of that one;
 2. :class:`~bagtools.pose_graph.constraints.LoopClosureSearch` proposes older
    keyframes within reach, matches them, and
-   :class:`~bagtools.pose_graph.constraints.ConsistencyCheck` accepts or rejects the
+   :class:`~bagtools.pose_graph.consistency.ConsistencyCheck` accepts or rejects the
    matches; accepted ones become loop edges;
 3. the graph is optimized (GTSAM Levenberg-Marquardt) when a loop corrects the
    estimate by more than ``correction_m``/``correction_rad``, or
@@ -55,9 +55,10 @@ from scipy.sparse.csgraph import dijkstra
 
 from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
-from bagtools.pose_graph.constraints import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, ConsistencyCheck, LoopCandidate, LoopClosureSearch,
-    LoopOptions,
+from bagtools.pose_graph.consistency import ConsistencyCheck
+from bagtools.pose_graph.constraints import LoopClosureSearch
+from bagtools.pose_graph.loops import (
+    ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, LoopCandidate, LoopOptions,
 )
 from bagtools.pose_graph.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi

@@ -49,7 +49,7 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    laser odometry's floor, and the uncertainty of the two local maps, which the
    odometry chain assembled (its edges' covariances propagated to each map's
    centre keyframe).
-4. **Acceptance** (:class:`ConsistencyCheck`): a score of at least
+4. **Acceptance** (:class:`~bagtools.pose_graph.consistency.ConsistencyCheck`): a score of at least
    ``min_score``; and the match must agree with the current estimate within
    the gate. When the estimate is sure of the relative pose (``sigma_t`` at
    most ``sure_sigma_m``) that is enough. Otherwise one match proves little (a
@@ -112,128 +112,15 @@ from bagtools.scan_matching import (
     match_scans_grid_peaks, voxel_subsample,
 )
 from bagtools.grid.freespace import FreeSpace
-from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
+from bagtools.pose_graph.loops import (
+    GLOBAL, LOCAL, LOOK_ALIKE, LOW_SCORE, REFINE_FAILED, SEES_THROUGH, TOO_FEW_POINTS, LoopCandidate, LoopOptions,
+)
+from bagtools.transforms import se2_between, se2_compose
 
-# Candidate outcomes (summary.json counts them).
-ACCEPTED = "accepted"
-PENDING = "pending"
-LOW_SCORE = "score below min_score"
-REFINE_FAILED = "NDT refinement failed or moved away"
-INCONSISTENT = "disagrees with the estimate"
-UNCONFIRMED = "unconfirmed: no consistent second match"
-OUTLIER = "outlier after optimization"
-# Candidate kinds: searched around the estimate, anywhere, or around a pending global match.
-LOCAL, GLOBAL, FOLLOW_UP = "local", "global", "follow-up"
-TOO_FEW_POINTS = "too few points"
 #: A local match is followed up only when its window spans at least this many sigmas of the estimate's uncertainty
 #: (95 % of where the place can be): beyond that, a match that is unique in its window may be a look-alike of a
 #: place outside it.
 COVER_SIGMAS = 2.0
-LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
-SEES_THROUGH = "walls where the other map saw through"
-
-
-@dataclass(frozen=True)
-class LoopOptions:
-    """Settings of the loop-closure search (see the module docstring; metres, radians).
-
-    The drift rates are the laser odometry's error growth, one sigma per metre
-    of graph distance; they size the search reach, the window and the gates.
-    """
-
-    search_radius_m: float = 5.0
-    min_travel_m: float = 8.0
-    drift_per_m: float = 0.03
-    drift_rad_per_m: float = 0.01
-    loop_edge_m: float = 1.0
-    turn_m_per_rad: float = 0.5
-    gate_sigmas: float = 3.0
-    min_window_m: float = 0.3
-    min_window_rad: float = 0.1
-    resolution_m: float = 0.1
-    angular_reach_m: float = 10.0
-    max_range_m: float = 20.0
-    max_points: int = 1500
-    min_score: float = 0.5
-    old_map_keyframes: int = 3
-    new_map_keyframes: int = 4
-    max_candidates: int = 2
-    wide_window_m: float = 2.0
-    wide_spacing_m: float = 2.0
-    loop_spacing_m: float = 1.0
-    sure_sigma_m: float = 0.3
-    pending_keyframes: int = 20
-    pair_max_path_m: float = 15.0
-    ndt_cell_m: float = 0.5
-    max_refine_m: float = 0.3
-    max_refine_rad: float = 0.1
-    max_seen_through: float = 0.1
-    cache_size: int = 64
-    global_after_m: float = 30.0
-    global_tile_m: float = 4.0
-    global_window_m: float = 4.0
-    global_min_score: float = 0.6
-    global_max_tiles: int = 32
-    global_unique_ratio: float = 0.9
-    global_gate_sigmas: float = 5.0
-    global_separation_m: float = 1.0
-    global_separation_rad: float = 0.3
-
-    def __post_init__(self) -> None:
-        for name in ("search_radius_m", "min_travel_m", "wide_window_m", "wide_spacing_m", "drift_per_m",
-                     "drift_rad_per_m", "loop_edge_m", "angular_reach_m", "gate_sigmas", "min_window_m", "min_window_rad",
-                     "resolution_m", "max_range_m", "loop_spacing_m", "sure_sigma_m", "pair_max_path_m", "ndt_cell_m",
-                     "max_refine_m", "max_refine_rad", "global_after_m", "global_tile_m", "global_window_m",
-                     "global_separation_m", "global_separation_rad", "global_gate_sigmas"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name in ("min_score", "global_min_score", "global_unique_ratio", "max_seen_through"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)!r}")
-        for name in ("max_points", "max_candidates", "pending_keyframes", "cache_size", "global_max_tiles"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)!r}")
-        if self.old_map_keyframes < 0 or self.new_map_keyframes < 0 or self.turn_m_per_rad < 0:
-            raise ValueError("old_map_keyframes, new_map_keyframes and turn_m_per_rad must not be negative")
-
-
-@dataclass
-class LoopCandidate:
-    """One loop-closure candidate: old keyframe ``old`` seen again from new keyframe ``new`` (node numbers).
-
-    ``guess``: the estimated pose of ``new`` in ``old``'s frame when searched;
-    ``window``: the search half-widths (m, m, rad); ``sigma``: the estimate's
-    uncertainty of it (m, rad); ``T_old_new``, ``covariance``: the match (None
-    when it failed); ``score``: correlative score in [0, 1]; ``status``:
-    ``ACCEPTED``, ``PENDING`` or why it was rejected; ``time_s``: match time;
-    ``kind``: ``LOCAL`` (around the estimate), ``GLOBAL`` (anywhere) or ``FOLLOW_UP`` (around a pending global
-    match).
-    """
-
-    old: int
-    new: int
-    guess: np.ndarray
-    window: np.ndarray
-    sigma: tuple[float, float]
-    T_old_new: np.ndarray | None = None
-    covariance: np.ndarray | None = None
-    score: float = 0.0
-    status: str = PENDING
-    time_s: float = 0.0
-    kind: str = LOCAL
-    look_alike: bool | None = None  # another place of the window scores as well (None: the window was not asked)
-    follows: LoopCandidate | None = None  # for a follow-up: the match it was searched around
-
-    def as_dict(self) -> dict:
-        out = {"old": self.old, "new": self.new, "kind": self.kind, "status": self.status, "score": round(self.score, 4),
-               "sigma_m": round(self.sigma[0], 4), "sigma_rad": round(self.sigma[1], 4),
-               "window": [round(float(v), 4) for v in self.window], "time_ms": round(self.time_s * 1e3, 2)}
-        if self.T_old_new is not None:
-            out["T_old_new"] = [round(float(v), 5) for v in self.T_old_new]
-            out["correction_m"] = round(float(np.hypot(*se2_between(self.guess, self.T_old_new)[:2])), 4)
-        return out
-
 
 #: Added to every loop covariance (m^2, m^2, rad^2): 1 cm and 0.3 degrees, the laser odometry's floor for its edges.
 COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
@@ -580,99 +467,3 @@ class LoopClosureSearch:
                                               self.map_covariance(new, self._new_range(new)))
         cand.time_s = time.perf_counter() - t0
         return cand
-
-
-class ConsistencyCheck:
-    """Accepts loop matches that agree with the estimate and, when it is unsure, with each other.
-
-    ``path_m``: the keyframes' distances along the path (shared with
-    :class:`LoopClosureSearch`, growing as keyframes arrive).
-    """
-
-    def __init__(self, options: LoopOptions, path_m: list[float]) -> None:
-        self.options = options
-        self.path_m = path_m
-        self.pending: list[LoopCandidate] = []
-        self.accepted: list[LoopCandidate] = []
-
-    def gate(self, sigma: tuple[float, float], sigmas: float | None = None) -> tuple[float, float]:
-        """Largest disagreement (m, rad) with an estimate of uncertainty ``sigma`` that passes, at ``sigmas``
-        (default ``gate_sigmas``) of it."""
-        o = self.options
-        k = o.gate_sigmas if sigmas is None else sigmas
-        return (k * sigma[0] + 2 * o.resolution_m, k * sigma[1] + 2 * o.resolution_m / o.angular_reach_m)
-
-    def review(self, cand: LoopCandidate, poses: np.ndarray) -> list[LoopCandidate]:
-        """Judge a matched candidate against the estimate ``poses``; returns the candidates accepted now."""
-        o = self.options
-        if cand.kind == GLOBAL:  # the estimate may be off by what the drift model allows, given a wide margin
-            residual = se2_between(se2_between(poses[cand.old], poses[cand.new]), cand.T_old_new)
-            gate_t, gate_r = self.gate(cand.sigma, o.global_gate_sigmas)
-        else:
-            residual = se2_between(cand.guess, cand.T_old_new)
-            gate_t, gate_r = self.gate(cand.sigma)
-        if np.hypot(residual[0], residual[1]) > gate_t or abs(wrap_to_pi(residual[2])) > gate_r:
-            cand.status = INCONSISTENT
-            return []
-        if cand.kind == LOCAL and cand.sigma[0] <= o.sure_sigma_m:
-            cand.status = ACCEPTED
-            self.accepted.append(cand)
-            return [cand]
-        partners = [p for p in self.pending + self.accepted[-20:] if self._pair_consistent(cand, p, poses)]
-        if not partners:
-            cand.status = PENDING
-            self.pending.append(cand)
-            return []
-        now = [cand] + [p for p in partners if p.status == PENDING]
-        for c in now:
-            c.status = ACCEPTED
-            self.accepted.append(c)
-        self.pending = [p for p in self.pending if p.status == PENDING]
-        return now
-
-    def supported(self, cand: LoopCandidate, poses: np.ndarray) -> bool:
-        """Is another accepted match, searched independently of ``cand``, pairwise consistent with it at the
-        estimate ``poses``? A follow-up and the match it was searched around are one piece of evidence here: a
-        follow-up repeats its match's error, so it confirms a match enough to enter the graph, not against it."""
-        def same_search(a: LoopCandidate, b: LoopCandidate) -> bool:
-            return a.follows is b or b.follows is a or (a.follows is not None and a.follows is b.follows)
-        return any(p is not cand and not same_search(cand, p) and self._pair_consistent(cand, p, poses)
-                   for p in self.accepted)
-
-    def _pair_consistent(self, a: LoopCandidate, b: LoopCandidate, poses: np.ndarray) -> bool:
-        """Does the cycle a.old -> a.new -> b.new -> b.old -> a.old close within the gate?"""
-        o = self.options
-        path = self.path_m
-        if abs(a.new - b.new) <= o.new_map_keyframes:  # their new maps share keyframes: one piece of evidence
-            return False
-        old_gap = abs(path[a.old] - path[b.old])
-        new_gap = abs(path[a.new] - path[b.new])
-        if old_gap > o.pair_max_path_m or new_gap > o.pair_max_path_m:
-            return False
-        # T_aold_anew should equal T_aold_bold (old chain) + T_bold_bnew (loop b) + T_bnew_anew (new chain).
-        through_b = se2_compose(se2_compose(se2_between(poses[a.old], poses[b.old]), b.T_old_new),
-                                se2_between(poses[b.new], poses[a.new]))
-        cycle = se2_between(a.T_old_new, through_b)
-        chain_m = old_gap + new_gap
-        sigma_t = math.sqrt(2.0) * o.resolution_m + o.drift_per_m * chain_m
-        sigma_r = math.sqrt(2.0) * o.resolution_m / o.angular_reach_m + o.drift_rad_per_m * chain_m
-        return bool(np.hypot(cycle[0], cycle[1]) <= o.gate_sigmas * sigma_t
-                    and abs(wrap_to_pi(cycle[2])) <= o.gate_sigmas * sigma_r)
-
-    def to_follow_up(self) -> list[LoopCandidate]:
-        """The matches waiting for a second one that a follow-up may give: those whose window was wide and held no
-        look-alike. A follow-up is searched in a small window where the match puts the robot, so it repeats the
-        match's error if the match had one: only a match that is the one good place of a wide window is worth it."""
-        return [p for p in self.pending if p.kind != FOLLOW_UP and p.look_alike is False]
-
-    def expire(self, newest: int) -> list[LoopCandidate]:
-        """Reject pending matches older than ``pending_keyframes`` keyframes before ``newest``; returns them."""
-        old = [p for p in self.pending if newest - p.new > self.options.pending_keyframes]
-        for p in old:
-            p.status = UNCONFIRMED
-        self.pending = [p for p in self.pending if p.status == PENDING]
-        return old
-
-    def flush(self) -> list[LoopCandidate]:
-        """At the end of the run: every match still pending is unconfirmed."""
-        return self.expire(newest=10**12)

@@ -50,7 +50,7 @@ from bagtools.io import LASERSCAN_TYPES, open_bag
 from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomResult, run_front_end
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph.backend import BackEndOptions, BackEndResult, build_pose_graph
-from bagtools.pose_graph.constraints import ACCEPTED, LoopOptions
+from bagtools.pose_graph.loops import ACCEPTED, LoopOptions
 from bagtools.trajectory import Relations, Trajectory, read_relations, relation_errors
 from bagtools.trajectory.evaluate import trajectory_errors
 from bagtools.transforms import pose2tform, se2_between, se2_compose, wrap_to_pi

@@ -14,7 +14,7 @@ import pytest
 
 from bagtools.io.carmen import write_flaser_log
 from bagtools.slam import SlamOptions, SlamPipeline
-from bagtools.pose_graph.constraints import ACCEPTED, FOLLOW_UP, SEES_THROUGH
+from bagtools.pose_graph.loops import ACCEPTED, FOLLOW_UP, SEES_THROUGH
 from tests.conftest import REPO, ros1_scan_slice
 
 BENCHMARK_DIR = REPO.parent / "shared" / "data" / "benchmark"

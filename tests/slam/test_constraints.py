@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bagtools.pose_graph.constraints import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOOK_ALIKE, PENDING, SEES_THROUGH, UNCONFIRMED, ConsistencyCheck,
-    LoopCandidate, LoopClosureSearch, LoopOptions, voxel_subsample,
+from bagtools.pose_graph.consistency import ConsistencyCheck
+from bagtools.pose_graph.constraints import LoopClosureSearch, voxel_subsample
+from bagtools.pose_graph.loops import (
+    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOOK_ALIKE, PENDING, SEES_THROUGH, UNCONFIRMED, LoopCandidate, LoopOptions,
 )
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world.world import World

@@ -19,7 +19,7 @@ from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph import build_pose_graph
 from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, write_slam
 from bagtools.trajectory.evaluate import align_se2
-from bagtools.pose_graph.constraints import ACCEPTED
+from bagtools.pose_graph.loops import ACCEPTED
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
