@@ -28,6 +28,7 @@ from bagtools.io.decode import (
     CloudArrays,
     DecodeError,
     LaserScanArrays,
+    OdometrySample,
     TfRows,
     _scan_geometry,
     decode_pointcloud2,
@@ -219,6 +220,30 @@ def tf_from_cdr(raw: bytes | memoryview) -> TfRows | None:
         rows.append((parent, child, sec * 1_000_000_000 + nanosec, *_TRANSFORM.unpack_from(raw, pos)))
         pos += _TRANSFORM.size
     return TfRows(rows)
+
+
+#: An Odometry's float64 fields after its frame ids: pose (position 3, orientation 4, covariance 36), twist (linear 3,
+#: angular 3, covariance 36).
+_ODOMETRY_DOUBLES = 85
+
+
+def odometry_from_cdr(raw: bytes | memoryview) -> OdometrySample | None:
+    """nav_msgs/msg/Odometry CDR bytes -> :class:`~bagtools.io.decode.OdometrySample` (as
+    :func:`~bagtools.io.decode.decode_odometry` gives for the deserialized message), or None when malformed."""
+    head = _header(raw)
+    if head is None:
+        return None
+    sec, nanosec, frame_id, pos = head
+    if pos + 4 > len(raw):
+        return None
+    (length,) = _U32.unpack_from(raw, pos)
+    child = _cdr_text(raw, pos + 4, length)
+    pos = 4 + ((pos + 4 + length - 4 + 7) & ~7)  # the doubles align to 8 (CDR counts from after the 4-byte header)
+    if child is None or pos + 8 * _ODOMETRY_DOUBLES > len(raw):
+        return None
+    v = np.frombuffer(raw, dtype="<f8", count=_ODOMETRY_DOUBLES, offset=pos).astype(np.float64)
+    return OdometrySample(sec * 1_000_000_000 + nanosec, frame_id, child, v[0:3], v[3:7], v[43:46], v[46:49],
+                          v[7:43].reshape(6, 6), v[49:85].reshape(6, 6))
 
 
 def _cdr_text(raw: bytes | memoryview, pos: int, length: int) -> str | None:

@@ -30,6 +30,8 @@ from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry, open_bag,
 )
+from bagtools.io.cdr import odometry_from_cdr
+from bagtools.io.decode import OdometrySample
 from bagtools.odometry.frontend import LaserOdometry
 from bagtools.odometry.options import GUESSES, VOXEL_PER_CELL, FrontEndOptions, cell_size_for
 from bagtools.odometry.steps import FrontEndRun
@@ -289,10 +291,12 @@ class NdtOdomPipeline:
         has_odom_topic = (self.options.use_odometry and ODOM_TOPIC in bag.topics
                           and bag.topics[ODOM_TOPIC].msgtype in ODOMETRY_TYPES)
         topics = [t for t in collector.topics if t in bag.topics] + ([ODOM_TOPIC] if has_odom_topic else [])
-        for rec in bag.messages(topics):
+        # tf and /odom stored as CDR are decoded straight from their bytes (a deserialized message otherwise)
+        for rec in bag.messages(topics, from_cdr={**collector.from_cdr, ODOM_TOPIC: odometry_from_cdr}):
             if rec.topic == ODOM_TOPIC:
-                odom_samples.append(decode_odometry(rec.msg))
-                odom_seqs.append(getattr(rec.msg.header, "seq", None))
+                decoded = isinstance(rec.msg, OdometrySample)
+                odom_samples.append(rec.msg if decoded else decode_odometry(rec.msg))
+                odom_seqs.append(None if decoded else getattr(rec.msg.header, "seq", None))
             else:
                 collector.add(rec)
         dynamic, static = collector.arrays()

@@ -123,3 +123,36 @@ def test_tf_messages_of_odd_frame_ids_and_many_transforms_decode_the_same() -> N
     assert tf_from_cdr(raw) == tf_rows(TYPESTORE.deserialize_cdr(raw, "tf2_msgs/msg/TFMessage"))
     assert len(tf_from_cdr(raw)) == 6
     assert tf_from_cdr(raw[:-9]) is None and tf_from_cdr(b"\x00\x00" + raw[2:]) is None
+
+
+def test_every_odometry_message_of_the_fixtures_decodes_as_rosbags_decodes_it() -> None:
+    from bagtools.io import decode_odometry
+    from bagtools.io.cdr import odometry_from_cdr
+    n = 0
+    for bag_path in (FIXTURES / "sim_lap_cloud_20s", FIXTURES / "sim_random_nocloud_20s"):
+        with open_bag(bag_path) as bag:
+            for raw in bag.raw_messages(["/odom"]):
+                same(odometry_from_cdr(raw.raw), decode_odometry(bag.deserialize(raw).msg))
+                n += 1
+    assert n > 100
+
+
+@pytest.mark.parametrize("frame, child", [("odom", "base_footprint"), ("o", "b"), ("wörld" * 3, "base_ü" + "x" * 7)])
+def test_odometry_of_odd_frame_ids_decodes_the_same_and_a_cut_message_is_left_to_rosbags(frame: str, child: str) -> None:
+    from bagtools.io import decode_odometry
+    from bagtools.io.cdr import odometry_from_cdr
+    T = TYPESTORE.types
+    rng = np.random.default_rng(3)
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=12, nanosec=345), frame_id=frame)
+    pose = T["geometry_msgs/msg/PoseWithCovariance"](
+        pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=1.5, y=-2.0, z=0.25),
+                                         orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.6, w=0.8)),
+        covariance=rng.normal(size=36))
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0.3, y=0.0, z=0.0),
+                                           angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=-0.7)),
+        covariance=rng.normal(size=36))
+    msg = T["nav_msgs/msg/Odometry"](header=header, child_frame_id=child, pose=pose, twist=twist)
+    raw = TYPESTORE.serialize_cdr(msg, "nav_msgs/msg/Odometry")
+    same(odometry_from_cdr(raw), decode_odometry(TYPESTORE.deserialize_cdr(raw, "nav_msgs/msg/Odometry")))
+    assert odometry_from_cdr(raw[:-1]) is None and odometry_from_cdr(b"\x00\x00" + raw[2:]) is None
