@@ -35,7 +35,7 @@ import heapq
 import io
 import struct
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -155,11 +155,16 @@ _RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 
 
-def chunk_records(data: bytes) -> Iterator[Schema | Channel | ChunkMessage]:
+def chunk_records(data: bytes, wanted: set[int] | None = None, check: Callable[[int, int], None] | None = None,
+                  tally: list[int] | None = None) -> Iterator[Schema | Channel | ChunkMessage]:
     """The schema, channel and message records packed in a decompressed chunk, in order.
 
     Message payloads are zero-copy views of ``data``. Raises an MCAP error where
     the records stop parsing (a damaged length); what came before has been yielded.
+    With ``wanted``, only the messages on those channel ids are yielded (the others
+    are parsed and counted, not built: a bag's other topics cost little); every
+    message is passed to ``check`` (channel id, log time), which raises on damage,
+    and counted in ``tally[0]`` once it passed.
     """
     view = memoryview(data)
     end = len(data)
@@ -175,7 +180,13 @@ def chunk_records(data: bytes) -> Iterator[Schema | Channel | ChunkMessage]:
             if length < _MESSAGE_HEAD.size:
                 raise McapError(f"message record of {length} bytes is too short")
             channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(data, body)
-            yield ChunkMessage(channel_id, sequence, log_time, publish_time, view[body + _MESSAGE_HEAD.size: body + length])
+            if check is not None:
+                check(channel_id, log_time)
+            if tally is not None:
+                tally[0] += 1
+            if wanted is None or channel_id in wanted:
+                yield ChunkMessage(channel_id, sequence, log_time, publish_time,
+                                   view[body + _MESSAGE_HEAD.size: body + length])
         elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
             stream = ReadDataStream(io.BytesIO(view[body: body + length]))
             yield Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream)
@@ -484,13 +495,21 @@ def _checked_records(scan: McapScan, chunk: Chunk, data: bytes) -> Iterator[Sche
     a channel never declared, or stamped outside the chunk's declared time range.
     Raises an MCAP error there (what came before has been yielded).
     """
-    for record in chunk_records(data):
-        if isinstance(record, ChunkMessage):
-            if record.channel_id not in scan.channels:
-                raise McapError(f"a message on undeclared channel {record.channel_id}")
-            if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
-                raise McapError("a message stamped outside the chunk's time range")
-        elif isinstance(record, (Schema, Channel)):
+    yield from _checked_chunk(scan, chunk, data, None, None)
+
+
+def _checked_chunk(scan: McapScan, chunk: Chunk, data: bytes, wanted: set[int] | None,
+                   tally: list[int] | None) -> Iterator[Schema | Channel | ChunkMessage]:
+    """:func:`chunk_records` of ``data`` with the checks of :func:`_checked_records` (messages on ``wanted``
+    channels only, every message counted in ``tally``)."""
+    def check(channel_id: int, log_time: int) -> None:
+        if channel_id not in scan.channels:
+            raise McapError(f"a message on undeclared channel {channel_id}")
+        if not chunk.message_start_time <= log_time <= chunk.message_end_time:
+            raise McapError("a message stamped outside the chunk's time range")
+
+    for record in chunk_records(data, wanted, check, tally):
+        if isinstance(record, (Schema, Channel)):
             _register(scan, record)
         yield record
 
@@ -568,8 +587,7 @@ def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None,
     with path.open("rb") as f:
         size = f.seek(0, io.SEEK_END)
         for segment, release_below in zip(segments, later_start):
-            batch = [m for m in _segment_messages(f, size, scan, segment, damage)
-                     if channel_ids is None or m.channel_id in channel_ids]
+            batch = list(_segment_messages(f, size, scan, segment, damage, channel_ids))
             if not pending and (not batch or batch[-1].log_time <= release_below) and _in_order(batch):
                 yield from batch  # the usual chunk: in order, and before every later one (no heap needed)
                 continue
@@ -587,16 +605,17 @@ def _in_order(messages: list[Message | ChunkMessage]) -> bool:
 
 
 def _segment_messages(f: io.BufferedReader, size: int, scan: McapScan, segment: Segment,
-                      damage: list[str] | None) -> Iterable[Message | ChunkMessage]:
-    """The first ``segment.n_good`` messages of a segment (the readable ones, as the scan found, or, for an
-    unverified scan, those before any damage its chunk shows now)."""
+                      damage: list[str] | None, wanted: set[int] | None = None) -> Iterable[Message | ChunkMessage]:
+    """Of the first ``segment.n_good`` messages of a segment (the readable ones, as the scan found, or, for an
+    unverified scan, those before any damage its chunk shows now), those on ``wanted`` channels (all if None)."""
     taken = 0
     if segment.n_top_level:
         f.seek(segment.offset)
         records = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records
         for record in records:
             if isinstance(record, Message):
-                yield record
+                if wanted is None or record.channel_id in wanted:
+                    yield record
                 taken += 1
                 if taken == segment.n_good:
                     return
@@ -608,37 +627,39 @@ def _segment_messages(f: io.BufferedReader, size: int, scan: McapScan, segment: 
         f.seek(segment.offset)
         chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records)
         if not scan.verified:
-            yield from _checked_messages(scan, segment, chunk, damage)
+            yield from _checked_messages(scan, segment, chunk, damage, wanted)
             return
         data = decompress_chunk(chunk)
-    records = chunk_records(data)
-    while taken < segment.n_good:
+    tally = [0]
+    records = chunk_records(data, wanted, None, tally)
+    while tally[0] < segment.n_good:
         try:
             record = next(records)
         except (StopIteration, *_READ_ERRORS):
             return
-        if isinstance(record, ChunkMessage):
+        if isinstance(record, ChunkMessage) and tally[0] <= segment.n_good:
             yield record
-            taken += 1
 
 
-def _checked_messages(scan: McapScan, segment: Segment, chunk: Chunk, damage: list[str] | None) -> Iterator[ChunkMessage]:
-    """The messages of a chunk not checked at open, checked now; the damage met is said in ``damage``."""
+def _checked_messages(scan: McapScan, segment: Segment, chunk: Chunk, damage: list[str] | None,
+                      wanted: set[int] | None = None) -> Iterator[ChunkMessage]:
+    """The messages (on ``wanted`` channels, all if None) of a chunk not checked at open, checked now; the damage
+    met is said in ``damage``."""
     said = damage if damage is not None else []
     try:
         data = decompress_chunk(chunk)
     except ChunkDamaged as err:
         said.append(f"chunk at byte {segment.offset} {err}; its {segment.n_good} messages are skipped")
         return
-    taken = 0
+    tally = [0]
     try:
-        for record in _checked_records(scan, chunk, data):
+        for record in _checked_chunk(scan, chunk, data, wanted, tally):
             if isinstance(record, ChunkMessage):
                 yield record
-                taken += 1
     except _READ_ERRORS as err:
-        said.append(_damaged_after(segment.offset, taken, err))
+        said.append(_damaged_after(segment.offset, tally[0], err))
         return
+    taken = tally[0]
     if taken != segment.n_good:
         said.append(f"chunk at byte {segment.offset} holds {taken} messages, its message indexes "
                     f"{segment.n_good}")
