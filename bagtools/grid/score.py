@@ -13,7 +13,6 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.ndimage import binary_dilation
 
 from bagtools.grid.occupancy import OccupancyGrid
 
@@ -97,6 +96,8 @@ def score_map(
             f"{truly_occupied.shape}, {truly_free.shape}")
     if tolerance_cells < 0:
         raise ValueError(f"tolerance_cells must be >= 0, got {tolerance_cells}")
+    from scipy.ndimage import binary_dilation  # here, not at import: every command that maps imports this module
+
     occupied = map_ternary == 1
     free = map_ternary == 0
     square = np.ones((3, 3), dtype=bool)
