@@ -132,3 +132,30 @@ def ros1_scan_slice(source: Path, path: Path, first: int, last: int, scan_topic:
             elif seen >= first or conn.topic == "/tf_static":
                 writer.write(out[conn.id], t_ns, raw)
     return path
+
+
+# -- SLAM and pose-graph fixtures: a long simulated figure eight, and the real CSAIL log ---------------------------
+
+
+@pytest.fixture(scope="session")
+def figure8_bag(tmp_path_factory) -> Path:
+    """A 200 s figure eight with high wheel-odometry noise, no camera (about 1000 scans, 35 m)."""
+    from bagtools_simulate.pipeline import SimConfig, simulate_bag
+    path = tmp_path_factory.mktemp("slam_sim") / "figure8"
+    simulate_bag(path, SimConfig(duration_s=200.0, route="figure8", odom_noise="high", cloud=False, seed=3))
+    return path
+
+
+@pytest.fixture(scope="session")
+def figure8_front(figure8_bag: Path):
+    """The stand-in front end (tests/standin.py) of the figure eight: its ground truth with SIM_DRIFT."""
+    from tests.standin import SIM_DRIFT, front_end_from_truth
+    return front_end_from_truth(figure8_bag, drift=SIM_DRIFT)
+
+
+@pytest.fixture(scope="session")
+def csail_odom() -> Path:
+    path = REAL_DIR / "csail_odom"
+    if not path.is_dir():
+        pytest.skip(f"real bags not available: {path} does not exist")
+    return path

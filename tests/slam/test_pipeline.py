@@ -1,6 +1,6 @@
 """The SLAM pipeline over a front-end run: accuracy, every output, and bad input.
 
-The front end is the stand-in of :mod:`tests.slam.standin` (ground truth with a
+The front end is the stand-in of :mod:`tests.standin` (ground truth with a
 laser odometry's drift), so these tests measure the back end alone.
 """
 
@@ -25,8 +25,7 @@ from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
 from tests.ndtodom.conftest import scan_bag
 from bagtools_simulate.sensors.lidar import Lidar
-from tests.slam.conftest import CSAIL_DRIFT
-from tests.slam.standin import Drift, as_front_end_result, front_end_from_truth, true_poses_at_scans
+from tests.standin import CSAIL_DRIFT, Drift, as_front_end_result, front_end_from_truth, true_poses_at_scans
 
 T0_NS = 1_700_000_000_000_000_000
 

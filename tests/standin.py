@@ -1,6 +1,6 @@
 """A stand-in for the laser-odometry front end, for tests only: a FrontEndRun built from a bag's /ground_truth.
 
-The real front end (``bagtools.ndtodom``) matches scans; this one takes the true
+The real front end (``bagtools.odometry``) matches scans; this one takes the true
 base pose at every scan, picks keyframes the way the front end does (every
 ``keyframe_distance_m`` or ``keyframe_angle_rad``), and corrupts the motion
 between consecutive keyframes with a drift like a laser odometry's: a scale
@@ -128,3 +128,9 @@ def standin(drift: Drift = Drift(), seed: int = 0):
     def front_end(bag_path, options) -> NdtOdomResult:
         return as_front_end_result(bag_path, front_end_from_truth(bag_path, options.topic, drift, seed))
     return front_end
+
+
+#: The stand-in's drift on simulated bags: about what NDT laser odometry does there (a few mm per keyframe).
+SIM_DRIFT = Drift(scale=0.01, heading_bias_rad_per_m=0.003, noise_m=0.003, noise_rad=0.002)
+#: The stand-in's drift on the CSAIL log: end point some 10 m off after its 380 m.
+CSAIL_DRIFT = Drift(scale=0.01, heading_bias_rad_per_m=0.002, noise_m=0.01, noise_rad=0.004)

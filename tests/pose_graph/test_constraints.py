@@ -12,7 +12,7 @@ from bagtools.pose_graph.loops import (
 )
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world.world import World
-from tests.slam.standin import true_poses_at_scans
+from tests.standin import true_poses_at_scans
 
 
 def _search_over(front, poses_of_keyframes: np.ndarray, options: LoopOptions | None = None) -> LoopClosureSearch:
