@@ -159,3 +159,37 @@ def csail_odom() -> Path:
     if not path.is_dir():
         pytest.skip(f"real bags not available: {path} does not exist")
     return path
+
+
+@pytest.fixture(scope="session")
+def csail_scans_run():
+    """The scans-only CSAIL log through the laser odometry (``run_front_end``, no odometry): once per session for
+    the front end's and slam's tests."""
+    from bagtools.odometry.pipeline import NdtOdomOptions, run_front_end
+    bag = REAL_DIR / "csail_scans"
+    if not bag.is_dir():
+        pytest.skip(f"real bags not available: {bag} does not exist")
+    return run_front_end(bag, NdtOdomOptions(use_odometry=False))
+
+
+@pytest.fixture(scope="session")
+def csail_restarted(csail_scans_run):
+    """``restarted(first)``: the laser odometry of the CSAIL scans from scan ``first`` on (a FrontEndRun), each start
+    run once per session: other speeds and keyframes at the sharp turns of scans 52-66."""
+    from functools import lru_cache
+
+    from bagtools.odometry import LaserOdometry
+    from bagtools.odometry.options import cell_size_for
+    from bagtools.odometry.pipeline import NdtOdomOptions
+
+    steps = csail_scans_run.front_end.steps
+    options = NdtOdomOptions(use_odometry=False).front_end(cell_size_for([s.points_base for s in steps]))
+
+    @lru_cache(maxsize=None)
+    def restarted(first: int):
+        front = LaserOdometry(options)
+        for step in steps[first:]:
+            front.register(step.stamp_ns, step.points_base, None)
+        return front.run
+
+    return restarted
