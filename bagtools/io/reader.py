@@ -569,7 +569,7 @@ class BagReader:
                            f"may be intact): {damage[0]}", self.path)
 
     def _warn_read_damage(self) -> list[str]:
-        """Say the damage met in MCAP chunks that were first checked while being read; return it."""
+        """Say the damage met while reading (MCAP chunks first checked then, ROS 1 chunks read past); return it."""
         met = [(source, d) for source in self.storage_sources() for d in getattr(source, "read_damage", ())]
         for source, damage in met:
             self._warn_once(f"{source.path}: {getattr(source, 'damage_kind', 'damaged MCAP')}: {damage}")
