@@ -3,6 +3,7 @@ imported where it is first needed (scipy, matplotlib, gtsam, dask, pyarrow, Open
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -27,7 +28,6 @@ def test_info_imports_nothing_heavy() -> None:
 
 
 def _cli_env(user_setting: str | None) -> str:
-    import os
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if user_setting is not None:
         env["OPENBLAS_NUM_THREADS"] = user_setting

@@ -488,20 +488,15 @@ def _scan_chunk(scan: McapScan, position: int, chunk: Chunk, partial: bool = Fal
     return segment.n_good
 
 
-def _checked_records(scan: McapScan, chunk: Chunk, data: bytes) -> Iterator[Schema | Channel | ChunkMessage]:
-    """The records of a decompressed chunk; the schemas and channels in it are registered in ``scan``.
+def _checked_records(scan: McapScan, chunk: Chunk, data: bytes, wanted: set[int] | None = None,
+                     tally: list[int] | None = None) -> Iterator[Schema | Channel | ChunkMessage]:
+    """The records of a decompressed chunk (messages on ``wanted`` channels only, all if None; every message
+    counted in ``tally``); the schemas and channels in it are registered in ``scan``.
 
     Without a CRC, damage shows as records that contradict the chunk: a message on
     a channel never declared, or stamped outside the chunk's declared time range.
     Raises an MCAP error there (what came before has been yielded).
     """
-    yield from _checked_chunk(scan, chunk, data, None, None)
-
-
-def _checked_chunk(scan: McapScan, chunk: Chunk, data: bytes, wanted: set[int] | None,
-                   tally: list[int] | None) -> Iterator[Schema | Channel | ChunkMessage]:
-    """:func:`chunk_records` of ``data`` with the checks of :func:`_checked_records` (messages on ``wanted``
-    channels only, every message counted in ``tally``)."""
     def check(channel_id: int, log_time: int) -> None:
         if channel_id not in scan.channels:
             raise McapError(f"a message on undeclared channel {channel_id}")
@@ -653,7 +648,7 @@ def _checked_messages(scan: McapScan, segment: Segment, chunk: Chunk, damage: li
         return
     tally = [0]
     try:
-        for record in _checked_chunk(scan, chunk, data, wanted, tally):
+        for record in _checked_records(scan, chunk, data, wanted, tally):
             if isinstance(record, ChunkMessage):
                 yield record
     except _READ_ERRORS as err:
