@@ -23,8 +23,8 @@ benchmarks' relations decide against that for 180 beams: the Intel log (180 beam
 scores 0.249 m with odometry (Kümmerle's metric, every relation), with -89..+90 at 1 degree 0.033 m, centred
 (-89.5..+89.5) 0.178 m, and spread end to end 0.018 m, as the bag converted by the benchmark's maintainers.
 ACES (180 beams, 0.036 and 0.038 m) and Freiburg 079 (360 beams, 0.031 and 0.032 m) are indifferent. The maximum range of these lines is
-``PARAM robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else the laser's no-return
-reading found in the log (:meth:`CarmenSource._max_range_of`), else :data:`FLASER_MAX_RANGE_M`.
+the laser's no-return reading found in the log (:meth:`CarmenSource._max_range_of`), else ``PARAM
+robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else :data:`FLASER_MAX_RANGE_M`.
 """
 
 from __future__ import annotations
@@ -50,6 +50,9 @@ FLASER_MAX_RANGE_M = 81.83
 #: How many FLASER/RLASER lines are read when the log is opened to find the laser's no-return reading.
 NO_RETURN_SAMPLE = 500
 NO_RETURN_MIN_LINES = 3
+#: A laser's no-return reading wavers by a few centimetres (Edmonton's 51.14-51.16, Seattle's 81.87-81.91): readings
+#: this close below the largest count as that reading.
+NO_RETURN_SPREAD_M = 0.1
 #: Frames of the presented bag.
 ODOM_FRAME, BASE_FRAME = "odom", "base_link"
 SCAN_MSGTYPE, ODOM_MSGTYPE, TF_MSGTYPE = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
@@ -320,15 +323,19 @@ class CarmenSource:
         self.message_count = len(records)
 
     def _max_range_of(self, kind: str, indexes: list[int]) -> float:
-        """The maximum range of a FLASER/RLASER laser (m): ``PARAM robot_front_laser_max`` (rear), else the laser's
-        no-return reading, else FLASER_MAX_RANGE_M. A laser reports no return as its largest reading, over and
-        over (50.00 in the ACES log, 81.83 in Intel's, 81.91 in Freiburg 079's): the largest reading of the first
-        NO_RETURN_SAMPLE lines is that value when it is also the most frequent of the readings above half of it
-        and comes in at least NO_RETURN_MIN_LINES lines (real far returns spread over centimetres; a saturated one
-        repeats, scan after scan)."""
+        """The maximum range of a FLASER/RLASER laser (m), readings at or past it being no return: the laser's
+        no-return reading found in its lines, else ``PARAM robot_front_laser_max`` (rear), else FLASER_MAX_RANGE_M.
+
+        A laser reports no return as its largest reading, over and over (50.00 in the ACES log, 81.83 in Intel's,
+        81.91 in Freiburg 079's, 51.14-51.16 in Edmonton's): the readings within NO_RETURN_SPREAD_M of the largest
+        of the first NO_RETURN_SAMPLE lines are that reading when they come in at least NO_RETURN_MIN_LINES lines
+        and no other span as wide above half of it holds more (real far returns spread over metres; a saturated
+        one repeats, scan after scan), and lie beyond twice the median reading; the smallest of them is the
+        maximum range. The readings outrank the PARAM:
+        it is what the robot was set to use (Edmonton's says 10 m, and a third of its readings lie between 10 and
+        51 m), not what the laser can see."""
         side = "front" if kind == "FLASER" else "rear"
-        if f"robot_{side}_laser_max" in self.params:
-            return self.params[f"robot_{side}_laser_max"]
+        fallback = self.params.get(f"robot_{side}_laser_max", FLASER_MAX_RANGE_M)
         readings = []
         for i in indexes[:NO_RETURN_SAMPLE]:
             words = self._lines[i].split()
@@ -336,16 +343,20 @@ class CarmenSource:
                 readings.append(_ranges(words[2:2 + int(words[1])]))
             except (ValueError, IndexError):  # a damaged line: skipped (and said) when read
                 continue
-        if len(readings) < NO_RETURN_MIN_LINES:
-            return FLASER_MAX_RANGE_M
         readings = [r[np.isfinite(r)] for r in readings]  # a reading past float32's range is no return, not a range
-        top = max(float(r.max(initial=0.0)) for r in readings)
-        lines_at_top = sum(bool((r == top).any()) for r in readings)
-        values = np.concatenate(readings)
-        far, counts = np.unique(values[values > 0.5 * top], return_counts=True)
-        if top > 0 and lines_at_top >= NO_RETURN_MIN_LINES and counts[-1] == counts.max():
-            return top
-        return FLASER_MAX_RANGE_M
+        top = max((float(r.max(initial=0.0)) for r in readings), default=0.0)
+        if len(readings) < NO_RETURN_MIN_LINES or top <= 0:
+            return fallback
+        low = np.float32(top - NO_RETURN_SPREAD_M)
+        lines_at_top = sum(bool((r > low).any()) for r in readings)
+        far = np.sort(np.concatenate(readings))
+        far = far[far > 0.5 * top]
+        at_top = len(far) - int(np.searchsorted(far, low, side="right"))
+        densest = int((np.searchsorted(far, far + np.float32(NO_RETURN_SPREAD_M), side="right") - np.arange(len(far))).max())
+        beyond_most = low > 2.0 * float(np.median(np.concatenate(readings)))  # a laser's range, not the room's
+        if lines_at_top >= NO_RETURN_MIN_LINES and at_top >= densest and beyond_most:
+            return float(far[far > low].min())
+        return fallback
 
     def _has_static(self) -> bool:
         return self._mount is not None or "/scan_rear" in self._kind_of_topic

@@ -186,9 +186,35 @@ def test_a_laser_that_reports_no_return_as_its_largest_reading_is_found(tmp_path
     with open_bag(write(tmp_path / "lone.clf", [flaser(list(lone), (0.0, 0.0, 0.0), "5.0")])) as bag:
         scan = decode_laserscan(next(r.msg for r in bag.messages(["/scan"])))
     assert scan.ranges_m[3] == pytest.approx(40.0) and scan.range_max_m == pytest.approx(FLASER_MAX_RANGE_M)
-    log = write(tmp_path / "param.clf", ["PARAM robot_front_laser_max 25.0 nohost 0", lines[0]])
+    # the readings outrank a PARAM they contradict (Edmonton's says 10 m, and a third of its readings are farther);
+    # without a no-return reading in the log, the PARAM holds
+    log = write(tmp_path / "param.clf", ["PARAM robot_front_laser_max 25.0 nohost 0"] + lines)
+    with open_bag(log) as bag:
+        assert decode_laserscan(next(r.msg for r in bag.messages(["/scan"]))).range_max_m == pytest.approx(saturation)
+    log = write(tmp_path / "param_only.clf", ["PARAM robot_front_laser_max 25.0 nohost 0",
+                                              flaser(list(lone), (0.0, 0.0, 0.0), "5.0")])
     with open_bag(log) as bag:
         assert decode_laserscan(next(r.msg for r in bag.messages(["/scan"]))).range_max_m == pytest.approx(25.0)
+
+
+def test_a_no_return_reading_that_wavers_is_found(tmp_path: Path) -> None:
+    """Edmonton's laser reports no return as 51.14, 51.15 or 51.16, most often 51.15, and returns up to 45 m are
+    real: all three readings are no return, the far returns stay (they were points 51 m away, or the PARAM's 10 m
+    cut a third of the returns)."""
+    rng = np.random.default_rng(1)
+    lines = []
+    for k in range(20):
+        ranges = rng.uniform(1.0, 20.0, 180).round(2)
+        ranges[::9] = rng.uniform(20.0, 45.0, 20).round(2)
+        ranges[k % 5::7] = rng.choice([51.14, 51.15, 51.15, 51.15, 51.16], len(ranges[k % 5::7]))
+        lines.append(flaser(list(ranges), (0.0, 0.0, 0.0), f"{10 + k}.0"))
+    with open_bag(write(tmp_path / "wavers.clf", ["PARAM robot_front_laser_max 10 nohost 0"] + lines)) as bag:
+        scans = [decode_laserscan(r.msg) for r in bag.messages(["/scan"])]
+    assert all(s.range_max_m == pytest.approx(51.14) for s in scans)
+    ranges = np.concatenate([s.ranges_m for s in scans])
+    assert np.isinf(ranges).sum() == sum(len(range(k % 5, 180, 7)) for k in range(20))
+    finite = ranges[np.isfinite(ranges)]
+    assert (finite > 10.0).sum() > 1500 and finite.max() > 40.0
 
 
 def test_a_bag_written_as_a_flaser_log_reads_back(tmp_path: Path) -> None:
