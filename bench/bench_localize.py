@@ -149,7 +149,8 @@ def scan_sequence(bag: Path):
     """A simulated bag's scans as the localizer takes them (base frame, recording order), its odometry poses
     (N, 3) and the ground truth (N, 3) at the scan stamps."""
     from bagtools.io import open_bag
-    from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomPipeline
+    from bagtools.odometry.options import NdtOdomOptions
+    from bagtools.odometry.pipeline import NdtOdomPipeline
     from bagtools.simtruth import read_ground_truth
     from bagtools.transforms import tform2pose
 
@@ -226,7 +227,7 @@ def _start_rows(name: str, nav2, inputs, odom: np.ndarray, truth: np.ndarray, tw
     its 180-degree ``twin`` (N, 3) in the map's frame): fixed within 2 s at the place (5 cm), still alike at 2 s
     with the place among the hypotheses, fixed wrong; and the starts the twin explains as well."""
     from bagtools.localize import MapLocalizer
-    from bagtools.localize.tracker import CONFIRM_MARGIN, TRACKING
+    from bagtools.localize.settings import CONFIRM_MARGIN, TRACKING
 
     points = nav2.occupied_points()
     starts = np.random.default_rng(11).choice(len(odom) - 20, size=n_starts, replace=False)
@@ -283,7 +284,7 @@ def _twin_alike(localizer, inputs, truth: np.ndarray, twin: np.ndarray, start: i
     only the 'head' hexagon breaks; both (N, 3) in the map's frame) explain the scans from ``start`` to
     ``deadline`` as well as the true pose: mean evidence (score x share of beams not through walls, on the map)
     within the confirmation margin?"""
-    from bagtools.localize.tracker import CONFIRM_MARGIN
+    from bagtools.localize.settings import CONFIRM_MARGIN
 
     ours, theirs = [], []
     for k in range(start, len(truth)):

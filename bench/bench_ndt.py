@@ -21,7 +21,7 @@ candidate scored), in the same run:
   then refined by NDT (widened cells of 0.5 m) seeded by the grid match. Times
   are of the whole call (with the reference raster built in it, or prebuilt)
   and of the search step alone (points already rotated and binned, no
-  covariance: ``correlative._branch_and_bound`` against ``_exhaustive``), each
+  covariance: ``window_search.branch_and_bound`` against ``exhaustive``), each
   the best of 3 runs per pair on both sides (a sub-millisecond call timed once
   carries the machine's hiccups and a cold cache), then the median over pairs;
 * for loop closure: a current scan from a free pose within 1.5 m of a local map
@@ -45,7 +45,7 @@ import open3d as o3d
 from scipy import ndimage
 
 from bagtools.scan_matching import (
-    CorrelativeReference, correlative, match_scans, match_scans_grid, match_scans_grid_peaks, ranges_to_points,
+    CorrelativeReference, match_scans, match_scans_grid, match_scans_grid_peaks, ranges_to_points, window_search,
 )
 from bench.common import Row
 from bench.scan_pairs import (
@@ -161,7 +161,7 @@ def edt_raster(points: np.ndarray, res: float = 0.05, sigma: float | None = None
     """The likelihood raster as it was built before (scipy's Euclidean distance transform over every cell, cut off
     at KERNEL_CUTOFF_SIGMAS), and its origin (m): the reference the stamped raster is held to."""
     sigma = res if sigma is None else sigma
-    cutoff = correlative.KERNEL_CUTOFF_SIGMAS * sigma
+    cutoff = window_search.KERNEL_CUTOFF_SIGMAS * sigma
     margin = int(np.ceil(cutoff / res)) + 1
     cells = np.floor(points / res)
     lo = cells.min(axis=0) - margin
@@ -171,7 +171,7 @@ def edt_raster(points: np.ndarray, res: float = 0.05, sigma: float | None = None
     dist = ndimage.distance_transform_edt(free, sampling=res)
     likelihood = np.exp(-0.5 * (dist / sigma) ** 2)
     likelihood[dist > cutoff] = 0.0
-    return np.rint(likelihood * correlative.RASTER_MAX).astype(np.uint16), lo * res
+    return np.rint(likelihood * window_search.RASTER_MAX).astype(np.uint16), lo * res
 
 
 def _raster_rows(pairs: list[ScanPair]) -> list[Row]:
@@ -241,9 +241,9 @@ def _grid_rows(pairs: list[ScanPair]) -> list[Row]:
         t_full_search.append(_best_of(lambda: match_scans_grid(current, prebuilt, search_range=GRID_WINDOW,
                                                                method="exhaustive"))[1])
         # The search step alone: the points already rotated and binned, no covariance.
-        window = correlative._window(prebuilt, current, np.zeros(3), np.array(GRID_WINDOW), None)
-        t_bnb_step.append(_best_of(lambda: correlative._branch_and_bound(window, 1))[1])
-        t_full_step.append(_best_of(lambda: correlative._exhaustive(window, 1))[1])
+        window = window_search.build_window(prebuilt, current, np.zeros(3), np.array(GRID_WINDOW), None)
+        t_bnb_step.append(_best_of(lambda: window_search.branch_and_bound(window, 1))[1])
+        t_full_step.append(_best_of(lambda: window_search.exhaustive(window, 1))[1])
         same.append(bnb.index == full.index and bnb.score == full.score)
         refined = _refine(current, reference, bnb.pose)
         ok_grid_ndt.append(_success(refined, pair.truth))

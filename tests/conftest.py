@@ -165,7 +165,8 @@ def csail_odom() -> Path:
 def csail_scans_run():
     """The scans-only CSAIL log through the laser odometry (``run_front_end``, no odometry): once per session for
     the front end's and slam's tests."""
-    from bagtools.odometry.pipeline import NdtOdomOptions, run_front_end
+    from bagtools.odometry.options import NdtOdomOptions
+    from bagtools.odometry.pipeline import run_front_end
     bag = REAL_DIR / "csail_scans"
     if not bag.is_dir():
         pytest.skip(f"real bags not available: {bag} does not exist")
@@ -180,7 +181,7 @@ def csail_restarted(csail_scans_run):
 
     from bagtools.odometry import LaserOdometry
     from bagtools.odometry.options import cell_size_for
-    from bagtools.odometry.pipeline import NdtOdomOptions
+    from bagtools.odometry.options import NdtOdomOptions
 
     steps = csail_scans_run.front_end.steps
     options = NdtOdomOptions(use_odometry=False).front_end(cell_size_for([s.points_base for s in steps]))

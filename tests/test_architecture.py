@@ -84,3 +84,13 @@ def test_the_layers_are_the_documented_ones() -> None:
     for i, names in enumerate(LAYERS):
         row = next(line for line in text.splitlines() if line.startswith(f"| {i} "))
         assert names <= {w.strip("`,") for w in row.split()}, row
+
+
+#: A module longer than this holds more than one idea: split it where the ideas part (issue #41).
+MAX_MODULE_LINES = 500
+
+
+def test_no_module_is_over_500_lines() -> None:
+    long = {str(p.relative_to(ROOT.parent)): n for p in sorted(ROOT.rglob("*.py"))
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert long == {}

@@ -43,7 +43,7 @@ from bagtools.io import (
 )
 from bagtools.io.cdr import laserscan_from_cdr, pointcloud2_from_cdr
 from bagtools.io.decode import CloudArrays, DecodeError
-from bagtools.io.reader import Record
+from bagtools.io.records import Record
 from bagtools.progress import progress
 
 SKIP_BACKWARDS = "stamp not after the previous scan"

@@ -19,7 +19,8 @@ from bagtools.io.decode import (
     decode_tf_message,
     stamp_to_ns,
 )
-from bagtools.io.reader import BagReader, RawRecord, Record, TopicInfo, open_bag
+from bagtools.io.reader import BagReader, open_bag
+from bagtools.io.records import RawRecord, Record, TopicInfo
 from bagtools.io.tf_topics import TF_STATIC_TOPIC, TF_TOPIC, TfCollector, read_tf_arrays
 
 __all__ = [

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from bagtools.io.reader import RawRecord, TopicInfo
+from bagtools.io.records import RawRecord, TopicInfo
 
 #: Suffixes of a CARMEN log (optionally followed by .gz).
 CARMEN_SUFFIXES = (".clf", ".log")
@@ -233,7 +233,7 @@ def _parse_odom(words: list[bytes]) -> tuple[int, tuple[float, float, float]]:
 
 
 class CarmenSource:
-    """A CARMEN log as a bag source (the interface of :mod:`bagtools.io.reader`'s sources).
+    """A CARMEN log as a bag source (the interface of :mod:`bagtools.io.sources`).
 
     The log is read once when opened (kept as its lines: a few tens of MB for the longest benchmark logs) and
     every record is sorted by stamp; a record's raw bytes are its index in its topic's recording order and its

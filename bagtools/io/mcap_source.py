@@ -19,45 +19,36 @@ A complete file whose summary agrees with its data is not walked: its schemas,
 channels, statistics and chunk indexes come from the summary, each chunk's head
 and message indexes are read (not its data) and checked against them, and the
 chunks are decompressed and checked only when their messages are read
-(``verified`` is then False, and :func:`iter_segments` says the damage it meets).
+(``verified`` is then False, and :func:`~bagtools.io.mcap_messages.iter_segments` says the damage it meets).
 Commands read a topic or two of a bag: decompressing every chunk of every
 topic at open time cost more than reading the scans themselves.
 ``scan_mcap(path, verify=True)`` always walks and checks everything.
 
-:func:`iter_segments` then streams the messages of the readable segments in
+:func:`~bagtools.io.mcap_messages.iter_segments` then streams the messages of the readable segments in
 log-time order, exactly: each segment's earliest stamp is known from the scan,
 so a message is released once no later segment can hold an earlier one.
 """
 
 from __future__ import annotations
 
-import heapq
 import io
 import struct
-import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
-from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, MessageIndex, Metadata,
                           MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import StreamReader
 
-#: Largest decompressed chunk accepted (a damaged size field must not make us allocate terabytes).
-MAX_CHUNK_BYTES = 1 << 30
+from bagtools.io.mcap_chunk import (MAX_CHUNK_BYTES, READ_ERRORS, ChunkDamaged, ChunkMessage, chunk_records,
+                                    decompress_chunk)
+
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, crc
-_READ_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError, OverflowError, MemoryError, IndexError,
-                KeyError, TypeError, AttributeError)
-
-
-class ChunkDamaged(Exception):
-    """A chunk cannot be used: what is wrong, in words."""
 
 
 @dataclass
@@ -103,96 +94,6 @@ class McapScan:
         return sum(self.counts.values())
 
 
-def decompress_chunk(chunk: Chunk, allow_partial: bool = False) -> bytes:
-    """The records of ``chunk``, decompressed and CRC-checked; raises :class:`ChunkDamaged`.
-
-    With ``allow_partial`` (a chunk cut by a truncation) as much as the data
-    gives is returned and neither the size nor the CRC is checked.
-    """
-    if chunk.uncompressed_size > MAX_CHUNK_BYTES:
-        raise ChunkDamaged(f"declares {chunk.uncompressed_size} uncompressed bytes (limit {MAX_CHUNK_BYTES})")
-    try:
-        if chunk.compression == "":
-            data = bytes(chunk.data)
-        elif chunk.compression == "zstd":
-            import zstandard
-
-            if allow_partial:
-                data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
-            else:  # never more than the declared size (+1 to see a lie), whatever the frame header says
-                data = zstandard.ZstdDecompressor().stream_reader(chunk.data).read(chunk.uncompressed_size + 1)
-        elif chunk.compression == "lz4":
-            import lz4.frame
-
-            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
-        else:
-            raise ChunkDamaged(f"unknown compression {chunk.compression[:40]!r}")
-    except ChunkDamaged:
-        raise
-    except Exception as err:  # zstd/lz4 raise their own error types on corrupt frames
-        raise ChunkDamaged(f"does not decompress ({type(err).__name__}: {err})") from err
-    if allow_partial:
-        return data
-    if len(data) != chunk.uncompressed_size:
-        raise ChunkDamaged(f"decompresses to {len(data)} bytes, not the {chunk.uncompressed_size} it declares")
-    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise ChunkDamaged("checksum mismatch (CRC of its records differs from the one recorded)")
-    return data
-
-
-class ChunkMessage(NamedTuple):
-    """A message record read from a chunk: the fields of :class:`mcap.records.Message`, as a light tuple
-    (a bag holds them by the hundred thousand); ``data`` is a view of the decompressed chunk."""
-
-    channel_id: int
-    sequence: int
-    log_time: int
-    publish_time: int
-    data: memoryview
-
-
-_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
-_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
-
-
-def chunk_records(data: bytes, wanted: set[int] | None = None, check: Callable[[int, int], None] | None = None,
-                  tally: list[int] | None = None) -> Iterator[Schema | Channel | ChunkMessage]:
-    """The schema, channel and message records packed in a decompressed chunk, in order.
-
-    Message payloads are zero-copy views of ``data``. Raises an MCAP error where
-    the records stop parsing (a damaged length); what came before has been yielded.
-    With ``wanted``, only the messages on those channel ids are yielded (the others
-    are parsed and counted, not built: a bag's other topics cost little); every
-    message is passed to ``check`` (channel id, log time), which raises on damage,
-    and counted in ``tally[0]`` once it passed.
-    """
-    view = memoryview(data)
-    end = len(data)
-    pos = 0
-    while pos < end:
-        if end - pos < _RECORD_HEAD.size:
-            raise McapError(f"{end - pos} stray bytes at the end of a chunk")
-        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-        body = pos + _RECORD_HEAD.size
-        if length > end - body:
-            raise McapError(f"record of {length} bytes overruns its chunk")
-        if opcode == Opcode.MESSAGE:
-            if length < _MESSAGE_HEAD.size:
-                raise McapError(f"message record of {length} bytes is too short")
-            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(data, body)
-            if check is not None:
-                check(channel_id, log_time)
-            if tally is not None:
-                tally[0] += 1
-            if wanted is None or channel_id in wanted:
-                yield ChunkMessage(channel_id, sequence, log_time, publish_time,
-                                   view[body + _MESSAGE_HEAD.size: body + length])
-        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
-            stream = ReadDataStream(io.BytesIO(view[body: body + length]))
-            yield Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream)
-        pos = body + length
-
-
 def _summary_records(f: io.BufferedReader, size: int) -> list[object] | None:
     """The records of the summary section (from the footer's summary start), None when unreadable or absent."""
     if size < len(MCAP_MAGIC) * 2 + _FOOTER_BYTES:
@@ -209,7 +110,7 @@ def _summary_records(f: io.BufferedReader, size: int) -> list[object] | None:
                 break
             records.append(record)
         return records
-    except (*_READ_ERRORS, StopIteration):
+    except (*READ_ERRORS, StopIteration):
         return None
 
 
@@ -219,7 +120,7 @@ def _footer_summary_start(f: io.BufferedReader, size: int) -> int:
         f.seek(size - len(MCAP_MAGIC) - _FOOTER_BYTES)
         footer = next(StreamReader(f, skip_magic=True, record_size_limit=64).records)
         return int(footer.summary_start) if isinstance(footer, Footer) else 0
-    except (*_READ_ERRORS, StopIteration):
+    except (*READ_ERRORS, StopIteration):
         return 0
 
 
@@ -277,7 +178,7 @@ class _Walker:
                 record = next(records)
             except StopIteration:
                 return
-            except _READ_ERRORS as err:
+            except READ_ERRORS as err:
                 self.error, self.failed_at = err, position
                 return
             yield position, record
@@ -401,7 +302,7 @@ def _scan_from_summary(f: io.BufferedReader, size: int) -> McapScan | None:
             if segment is None:
                 return None
             scan.segments.append(segment)
-    except (*_READ_ERRORS, StopIteration):
+    except (*READ_ERRORS, StopIteration):
         return None
     statistics = stats[0]
     if scan.message_count != statistics.message_count or any(
@@ -474,54 +375,33 @@ def _scan_chunk(scan: McapScan, position: int, chunk: Chunk, partial: bool = Fal
         return 0
     segment = Segment(position, chunk.message_start_time, 0, set(), partial_body=partial)
     try:
-        for record in _checked_records(scan, chunk, data):
+        for record in checked_records(scan, chunk, data):
             if isinstance(record, ChunkMessage):
                 segment.n_good += 1
                 segment.channels.add(record.channel_id)
                 segment.start_ns = min(segment.start_ns, record.log_time)
                 _count(scan, record)
-    except _READ_ERRORS as err:
+    except READ_ERRORS as err:
         if not partial:
-            scan.damage.append(_damaged_after(position, segment.n_good, err))
+            scan.damage.append(damaged_after(position, segment.n_good, err))
     if segment.n_good:
         scan.segments.append(segment)
     return segment.n_good
 
 
-def _checked_records(scan: McapScan, chunk: Chunk, data: bytes, wanted: set[int] | None = None,
-                     tally: list[int] | None = None) -> Iterator[Schema | Channel | ChunkMessage]:
-    """The records of a decompressed chunk (messages on ``wanted`` channels only, all if None; every message
-    counted in ``tally``); the schemas and channels in it are registered in ``scan``.
-
-    Without a CRC, damage shows as records that contradict the chunk: a message on
-    a channel never declared, or stamped outside the chunk's declared time range.
-    Raises an MCAP error there (what came before has been yielded).
-    """
-    def check(channel_id: int, log_time: int) -> None:
-        if channel_id not in scan.channels:
-            raise McapError(f"a message on undeclared channel {channel_id}")
-        if not chunk.message_start_time <= log_time <= chunk.message_end_time:
-            raise McapError("a message stamped outside the chunk's time range")
-
-    for record in chunk_records(data, wanted, check, tally):
-        if isinstance(record, (Schema, Channel)):
-            _register(scan, record)
-        yield record
-
-
-def _damaged_after(position: int, n_good: int, err: BaseException) -> str:
+def damaged_after(position: int, n_good: int, err: BaseException) -> str:
     return (f"chunk at byte {position} is damaged after {n_good} messages ({_describe(err)}); "
             "the rest of it is skipped")
 
 
 def _recover_cut_chunk(scan: McapScan, f: io.BufferedReader, position: int, size: int) -> None:
     """The file ends inside the record at ``position``: if it is a chunk, take what its prefix holds."""
-    chunk = _read_cut_chunk(f, position, size)
+    chunk = read_cut_chunk(f, position, size)
     if chunk is not None:
         _scan_chunk(scan, position, chunk, partial=True)
 
 
-def _read_cut_chunk(f: io.BufferedReader, position: int, size: int) -> Chunk | None:
+def read_cut_chunk(f: io.BufferedReader, position: int, size: int) -> Chunk | None:
     """The chunk record at ``position`` with as much of its data as the file holds (None if not a chunk)."""
     head_size = 1 + 8 + 8 + 8 + 8 + 4 + 4
     f.seek(position)
@@ -563,98 +443,22 @@ def _finish(scan: McapScan) -> McapScan:
     return scan
 
 
-def iter_segments(path: Path, scan: McapScan, channel_ids: set[int] | None,
-                  damage: list[str] | None = None) -> Iterator[Message | ChunkMessage]:
-    """Messages of the readable segments of ``scan`` on ``channel_ids`` (all if None), in log-time order.
+def checked_records(scan: McapScan, chunk: Chunk, data: bytes, wanted: set[int] | None = None,
+                     tally: list[int] | None = None) -> Iterator[Schema | Channel | ChunkMessage]:
+    """The records of a decompressed chunk (messages on ``wanted`` channels only, all if None; every message
+    counted in ``tally``); the schemas and channels in it are registered in ``scan``.
 
-    A chunk of an unverified scan is checked as it is read: when it is damaged, what
-    precedes the damage is yielded and one line is added to ``damage``.
+    Without a CRC, damage shows as records that contradict the chunk: a message on
+    a channel never declared, or stamped outside the chunk's declared time range.
+    Raises an MCAP error there (what came before has been yielded).
     """
-    segments = [s for s in scan.segments if channel_ids is None or s.channels & channel_ids]
-    # later_start[i]: the earliest stamp any segment after i can hold.
-    later_start = [0] * len(segments)
-    running = None
-    for i in range(len(segments) - 1, -1, -1):
-        later_start[i] = running if running is not None else 1 << 64
-        running = segments[i].start_ns if running is None else min(running, segments[i].start_ns)
-    pending: list[tuple[int, int, Message | ChunkMessage]] = []
-    seq = 0
-    with path.open("rb") as f:
-        size = f.seek(0, io.SEEK_END)
-        for segment, release_below in zip(segments, later_start):
-            batch = list(_segment_messages(f, size, scan, segment, damage, channel_ids))
-            if not pending and (not batch or batch[-1].log_time <= release_below) and _in_order(batch):
-                yield from batch  # the usual chunk: in order, and before every later one (no heap needed)
-                continue
-            for message in batch:
-                heapq.heappush(pending, (message.log_time, seq, message))
-                seq += 1
-            while pending and pending[0][0] <= release_below:
-                yield heapq.heappop(pending)[2]
-    while pending:
-        yield heapq.heappop(pending)[2]
+    def check(channel_id: int, log_time: int) -> None:
+        if channel_id not in scan.channels:
+            raise McapError(f"a message on undeclared channel {channel_id}")
+        if not chunk.message_start_time <= log_time <= chunk.message_end_time:
+            raise McapError("a message stamped outside the chunk's time range")
 
-
-def _in_order(messages: list[Message | ChunkMessage]) -> bool:
-    return all(a.log_time <= b.log_time for a, b in zip(messages, messages[1:]))
-
-
-def _segment_messages(f: io.BufferedReader, size: int, scan: McapScan, segment: Segment,
-                      damage: list[str] | None, wanted: set[int] | None = None) -> Iterable[Message | ChunkMessage]:
-    """Of the first ``segment.n_good`` messages of a segment (the readable ones, as the scan found, or, for an
-    unverified scan, those before any damage its chunk shows now), those on ``wanted`` channels (all if None)."""
-    taken = 0
-    if segment.n_top_level:
-        f.seek(segment.offset)
-        records = StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records
-        for record in records:
-            if isinstance(record, Message):
-                if wanted is None or record.channel_id in wanted:
-                    yield record
-                taken += 1
-                if taken == segment.n_good:
-                    return
-        return
-    if segment.partial_body:
-        chunk = _read_cut_chunk(f, segment.offset, size)
-        data = decompress_chunk(chunk, allow_partial=True) if chunk is not None else b""
-    else:
-        f.seek(segment.offset)
-        chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=size).records)
-        if not scan.verified:
-            yield from _checked_messages(scan, segment, chunk, damage, wanted)
-            return
-        data = decompress_chunk(chunk)
-    tally = [0]
-    records = chunk_records(data, wanted, None, tally)
-    while tally[0] < segment.n_good:
-        try:
-            record = next(records)
-        except (StopIteration, *_READ_ERRORS):
-            return
-        if isinstance(record, ChunkMessage) and tally[0] <= segment.n_good:
-            yield record
-
-
-def _checked_messages(scan: McapScan, segment: Segment, chunk: Chunk, damage: list[str] | None,
-                      wanted: set[int] | None = None) -> Iterator[ChunkMessage]:
-    """The messages (on ``wanted`` channels, all if None) of a chunk not checked at open, checked now; the damage
-    met is said in ``damage``."""
-    said = damage if damage is not None else []
-    try:
-        data = decompress_chunk(chunk)
-    except ChunkDamaged as err:
-        said.append(f"chunk at byte {segment.offset} {err}; its {segment.n_good} messages are skipped")
-        return
-    tally = [0]
-    try:
-        for record in _checked_records(scan, chunk, data, wanted, tally):
-            if isinstance(record, ChunkMessage):
-                yield record
-    except _READ_ERRORS as err:
-        said.append(_damaged_after(segment.offset, tally[0], err))
-        return
-    taken = tally[0]
-    if taken != segment.n_good:
-        said.append(f"chunk at byte {segment.offset} holds {taken} messages, its message indexes "
-                    f"{segment.n_good}")
+    for record in chunk_records(data, wanted, check, tally):
+        if isinstance(record, (Schema, Channel)):
+            _register(scan, record)
+        yield record

@@ -8,7 +8,8 @@ import numpy as np
 
 from bagtools.io.cdr import tf_from_cdr
 from bagtools.io.decode import TF_TYPES, TfArrays, TfRows, tf_arrays, tf_rows
-from bagtools.io.reader import BagReader, Record
+from bagtools.io.reader import BagReader
+from bagtools.io.records import Record
 from bagtools.progress import progress
 
 TF_TOPIC = "/tf"

@@ -22,7 +22,8 @@ import numpy as np
 
 from bagtools.grid import Nav2Map
 from bagtools.scan_matching import CorrelativeReference, match_scans_grid, match_scans_grid_peaks, voxel_subsample
-from bagtools.scan_matching.correlative import MAX_DEPTH, MAX_RASTER_CELLS
+from bagtools.scan_matching.correlative import MAX_RASTER_CELLS
+from bagtools.scan_matching.window_search import MAX_DEPTH
 
 #: Hypotheses closer than this (m, rad) are one place.
 SEPARATION = (1.0, 0.3)

@@ -28,10 +28,11 @@ from bagtools.errors import BagtoolsError
 from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import BagReader, open_bag
 from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
-from bagtools.localize.tracker import (
-    AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED, Event, MapLocalizer,
-)
-from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomPipeline, ScanInputs
+from bagtools.localize.hypotheses import Event
+from bagtools.localize.settings import AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED
+from bagtools.localize.tracker import MapLocalizer
+from bagtools.odometry.options import NdtOdomOptions
+from bagtools.odometry.pipeline import NdtOdomPipeline, ScanInputs
 from bagtools.odometry import FrontEndRun
 from bagtools.progress import progress
 from bagtools.scan_matching import CorrelativeReference

@@ -1,187 +1,40 @@
 """Where the robot is in a map it already has, scan by scan, from no initial pose.
 
-:class:`MapLocalizer` takes the scans in recording order (points in the robot
-base frame, with the base's odometry pose: the pipeline gives the laser
-odometry, which uses the wheels when the bag has them) and keeps one or more
-hypotheses of the base's pose in the map:
+:class:`MapLocalizer` takes the scans in recording order (points in the robot base frame, with the base's odometry
+pose: the laser odometry, which uses the wheels when the bag has them) and keeps one or more hypotheses of the base's
+pose in the map, through four states: **searching** (the global search, :class:`GlobalLocalizer`, places the scan
+anywhere), **confirming** (each hypothesis follows the robot until one beats the others), **tracking** (each scan
+matched against the map, held by the motion; a window search when NDT is poor; the motion bounds the robot while the
+odometry is continuous, and a scan the map does not explain is **unmapped**, carried by the motion) and **lost**.
+``docs/commands/localize.md`` ("The tracker, step by step") has each state and the fixed settings
+(:mod:`bagtools.localize.settings`) that shape it.
 
-- **searching**: no hypothesis. The global search (:class:`GlobalLocalizer`)
-  places the scan anywhere in the map at any heading; its distinct places
-  (a symmetric room gives several) become the hypotheses.
-- **confirming**: every hypothesis follows the robot (each scan tracked against
-  the map, below); one that stops matching is dropped. The best is committed
-  once it has matched ``CONFIRM_SCANS`` scans and beats every other by
-  ``CONFIRM_MARGIN`` in mean evidence over them (and scores ``FIX_SCORE``): the
-  first fix. A hypothesis' evidence for a scan is its score times the share of
-  the scan's beams that do not pass through the map's walls on their way to
-  their return: in a room that looks alike turned around, the look-alike place
-  puts some walls where the robot saw through. Hypotheses the scans do not tell
-  apart by then are *ambiguous*, and a map that repeats itself stays so until
-  the robot sees what tells the places apart. The committed hypothesis' earlier
-  poses are kept: the trajectory covers the scans since its search.
-- **tracking**: each scan matched against the map (not against the previous
-  scan), from the last good pose moved by the odometry since (or, without
-  odometry, by the velocity of the last half second of good matches): NDT on
-  the map's normal distributions held by that prior (matched to where the
-  map's walls face its free space), a correlative window search when NDT's
-  result is poor or far from the prior, or scores under ``CHECK_RATIO`` of the
-  typical score (along a corridor the prior holds NDT wherever a drifting
-  motion put it: the window's pose is taken when it scores ``CHECK_MARGIN``
-  more, as the robot typically and usually matches and as a fix must), and a
-  wide local search (a fast turn, an odometry glitch) when that is poor too. A better
-  match where the motion can have taken the robot (``NDT_JUMP``) is taken; one
-  anywhere else must beat the motion's by ``SWITCH_MARGIN`` and score as a fix
-  must (``FIX_SCORE``, and ``RECOVER_RATIO`` of the typical score): a map that
-  merely lacks what the robot sees is no reason to move it.
-- **the motion bounds the robot** while the odometry is *continuous* (its maker,
-  the laser odometry, matched every scan since the last good match to the ones
-  before: the scene went on, so the robot was not carried away). Then it is
-  within ``BOUND_SIGMAS`` of the prior's standard deviations (which grow with
-  the motion since that match), widened along a corridor the matches since did
-  not fix the position along (``CONSTRAINED_RATIO``) by ODOM_NOISE_RATIO of the
-  path travelled, and nothing beyond is searched or taken; a
-  scan the map does not explain there is no miss: the motion carries the pose
-  (**unmapped**), searched around every ``SEARCH_EVERY_SCANS`` scans (once the
-  scan moved by a map cell since a search found nothing: standing still, it
-  would see the same), until the map is seen again (a correction of more than
-  ``WINDOW`` is said: 'corrected').
-  This is what holds the robot in a part of the building the map saw only from
-  afar (free space, no walls), where a look-alike elsewhere matches better.
-- **lost**: otherwise (no odometry's continuity, e.g. a kidnap breaks it), a
-  scan scoring under ``LOST_RATIO`` of the typical score after all that,
-  ``LOST_SCANS`` times in a row, means the robot is lost: it is counted, said,
-  and searched for again, where it was (moved by the motion since, in a wide
-  window) competing with the global search's places; a place found after a
-  loss must score ``RECOVER_RATIO`` of the typical score before it. A jump the
-  motion cannot explain is a loss recovered at once. A poorly matched scan that
-  falls mostly where the map knows nothing is off the map (**unmapped**), not
-  a miss.
-
-Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base +
-[x, y]``); scores are :meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
+Poses are [x, y, theta] of the base in the map frame (``p_map = R(theta) p_base + [x, y]``); scores are
+:meth:`CorrelativeReference.score` on the map's raster, in [0, 1].
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
 from bagtools.localize.global_search import SEPARATION, GlobalLocalizer
+from bagtools.localize.hypotheses import Bound, Event, Fit, Hypothesis, RecentScores
+from bagtools.localize.settings import (  # the tracker's fixed settings
+    AMBIGUOUS, CHECK_MARGIN, CHECK_RATIO, CONFIRMING, CONFIRM_MARGIN, CONFIRM_SCANS, CONSTRAINED_RATIO,
+    DIVERGED_SCORE, FIX_SCORE, LOCAL_WINDOW, LOST, LOST_RATIO, LOST_SCANS, MAPPED_SHARE, MAX_ANGULAR_STEP,
+    MAX_HYPOTHESES, MIN_SCORE, NDT_CELL_M, NDT_JUMP, RECOVER_RATIO, SCAN_MATCHED_NOISE_M, SEARCHING,
+    SEARCH_EVERY_SCANS, SWITCH_MARGIN, THROUGH_BEAMS, THROUGH_RANGE_M, THROUGH_TOLERANCE_M, TRACKING, TYPICAL_SCANS,
+    UNMAPPED, USUAL_SCANS, WINDOW,
+)
 from bagtools.scan_matching import GridMatchResult, NdtReference, match_scans, match_scans_grid
-from bagtools.scan_matching.correlative import RASTER_MAX
+from bagtools.scan_matching.window_search import RASTER_MAX
 from bagtools.odometry.motion import (
-    ODOM_NOISE_M, ODOM_NOISE_RATIO, PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S, odometry_sd, steady_velocity_sd,
+    ODOM_NOISE_M, PRIOR_WEIGHT_DEFAULT, VELOCITY_SPAN_S, odometry_sd, steady_velocity_sd,
 )
 from bagtools.transforms import se2_between, se2_compose
-
-#: A hypothesis is committed after matching this many scans (its search's scan included)...
-CONFIRM_SCANS = 5
-#: ... when its mean score over them beats every other hypothesis' by this much, and is at least FIX_SCORE (a bag
-#: from another place matches some walls of any map, at scores of 0.15 to 0.5; the right place scores 0.7 to 0.95
-#: on simulated bags and 0.9 on the CSAIL log's map).
-CONFIRM_MARGIN = 0.05
-FIX_SCORE = 0.5
-#: A scan scoring under this share of the typical (median recent) score is poorly matched (a map that lacks
-#: part of what the robot sees lowers the score gradually; a kidnap drops it to chance)...
-LOST_RATIO = 0.35
-#: ... and this many poorly matched scans in a row mean the robot is lost.
-LOST_SCANS = 3
-#: No score under this is a match, whatever is typical.
-MIN_SCORE = 0.15
-#: Scores kept for the typical score, and for the usual one (over a longer span: see MapLocalizer._usual).
-TYPICAL_SCANS, USUAL_SCANS = 50, 1000
-#: The window searched around the prior when the motion is unknown or NDT's result is poor (m, m, rad), and
-#: the wide local window searched when that fails too (a fast turn, an odometry glitch) before a scan is a miss.
-WINDOW = (0.5, 0.5, 0.4)
-LOCAL_WINDOW = (2.0, 2.0, math.pi / 2)
-#: A place found after a loss is committed only when it scores this share of the typical score before the loss.
-RECOVER_RATIO = 0.8
-#: The motion prior's noise floor (m) when the odometry's step is a trusted scan match (``continuous``): the laser
-#: odometry is off by a few centimetres over metres on the benchmark logs. Wheel odometry's floor (ODOM_NOISE_M,
-#: 5 cm) lets a map that lacks part of what the robot sees pull it along a corridor, match by match.
-SCAN_MATCHED_NOISE_M = 0.02
-#: Where the odometry went on unbroken since the last good match (the robot was not carried), it is within this
-#: many of the prior's standard deviations of where the odometry puts it (they grow with the motion since that match).
-BOUND_SIGMAS = 3.0
-#: A match fixes the position in every direction when the weaker eigenvalue of NDT's translational Hessian is at
-#: least this share of the stronger (0.2 to 0.7 in rooms and crossings on Intel; under 0.02 along its corridors).
-CONSTRAINED_RATIO = 0.05
-#: NDT's result is not trusted when it moves this far from its prior (m, rad).
-NDT_JUMP = (0.25, 0.15)
-#: The window search overrules the motion only when it scores this much more than NDT held by the motion.
-SWITCH_MARGIN = 0.1
-#: NDT held by the motion scoring under this share of the typical score is checked by the window search around
-#: it, whose pose is taken when it scores this much more (a drifting motion along a corridor).
-CHECK_RATIO, CHECK_MARGIN = 0.9, 0.05
-#: The check's window search turns in steps of at most this (rad), a scan of near returns only too (see
-#: MapLocalizer._window_search).
-MAX_ANGULAR_STEP = 0.05
-#: NDT's result is taken unless it scores this much under its start (it diverged).
-DIVERGED_SCORE = 0.05
-#: A beam passes through a wall when an occupied cell lies on it short of this distance (m) before its return.
-THROUGH_TOLERANCE_M = 0.15
-#: Beams tested for passing through walls at most this many per scan (spread over the scan), each up to this range (m).
-THROUGH_BEAMS, THROUGH_RANGE_M = 120, 10.0
-#: A poorly matched scan with less than this share of its returns where the map knows what is there is off the
-#: map (a place the map never saw): the motion carries the pose ('unmapped'), and it is no miss.
-MAPPED_SHARE = 0.5
-#: Cell of the map's normal distributions (m).
-NDT_CELL_M = 0.5
-#: Hypotheses at most this many; a search that finds none is repeated this many scans later.
-MAX_HYPOTHESES = 4
-SEARCH_EVERY_SCANS = 5
-
-SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, UNMAPPED, LOST = (
-    "searching", "confirming", "ambiguous", "tracking", "unmapped", "lost")
-
-
-@dataclass
-class _Hypothesis:
-    """One place the robot may be: its pose now, the poses and scores of the scans it matched, its misses."""
-
-    pose: np.ndarray
-    since: int  # the scan it was born at
-    poses: dict[int, np.ndarray] = field(default_factory=dict)
-    matched: set[int] = field(default_factory=set)  # the scans it matched well on the map
-    scores: list[float] = field(default_factory=list)
-    evidence: list[float] = field(default_factory=list)  # score x share of beams not through walls, per scan
-    misses: int = 0
-    anchor: tuple[np.ndarray, np.ndarray] | None = None  # (map pose, odometry pose) at its last good match
-    recent: deque = field(default_factory=lambda: deque(maxlen=50))  # (stamp_ns, map pose) of its good matches
-    stamp_ns: int = 0
-    continued: bool = False  # where the robot was before it was lost, moved by the motion since
-    unbroken: bool = False  # the odometry since its last good match was continuous throughout
-    loose_m: float = 0.0  # path (m) from its last match that fixed the position in every direction to its anchor
-    loose_dir: np.ndarray | None = None  # the direction (map frame) the matches since did not fix
-    coasting: int = 0  # scans in a row carried by the motion (off the map, or a map lacking what it sees)
-    searched_at: np.ndarray | None = None  # odometry pose of its last search that found nothing, while carried
-
-
-class _Fit(NamedTuple):
-    """A scan matched on the map: base pose [x, y, theta], raster score, and the direction (unit (2,), map frame)
-    along which the map does not fix the position there (a bare corridor's), None where it fixes it in every one."""
-
-    pose: np.ndarray
-    score: float
-    loose: np.ndarray | None
-
-
-@dataclass
-class Event:
-    """Something the localizer did: ``kind`` 'fix' (committed), 'lost', 'recovered' or 'corrected' (the map moved
-    the pose by more than WINDOW where the motion was known to be unbroken), at scan ``index`` (stamp ``stamp_ns``)
-    and map pose ``pose`` (the last good pose for 'lost')."""
-
-    kind: str
-    index: int
-    stamp_ns: int
-    pose: np.ndarray
-
 
 class MapLocalizer:
     """Tracks a robot in a map (see the module docstring).
@@ -209,21 +62,21 @@ class MapLocalizer:
         self.known = known
         self.ndt = NdtReference.from_points(map_points if wall_faces is None else wall_faces, cell_size=NDT_CELL_M,
                                             cell_model="widened")
-        self.hypotheses: list[_Hypothesis] = []
-        self.committed: _Hypothesis | None = None
+        self.hypotheses: list[Hypothesis] = []
+        self.committed: Hypothesis | None = None
         self.poses: dict[int, np.ndarray] = {}  # scan index -> map pose, once known
         self.matched: set[int] = set()  # the scans of self.poses placed by a good match on the map (not the motion)
         self.scores: dict[int, float] = {}
         self.states: list[str] = []
         self.events: list[Event] = []
-        self.typical = _RecentScores(TYPICAL_SCANS)
-        self.usual = _RecentScores(USUAL_SCANS)  # the same scores over a longer span
+        self.typical = RecentScores(TYPICAL_SCANS)
+        self.usual = RecentScores(USUAL_SCANS)  # the same scores over a longer span
         self.searches = 0
         self._next_search = 0
         self._initial = None if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
         self._lost_since: int | None = None
         self._continuous = False
-        self._continued: _Hypothesis | None = None
+        self._continued: Hypothesis | None = None
         self._typical_before_loss = 0.0
 
     # -- one scan -------------------------------------------------------------------------------
@@ -268,7 +121,7 @@ class MapLocalizer:
         self._next_search = index + 1
         return LOST
 
-    def _recent_misses(self, h: _Hypothesis, index: int) -> set[int]:
+    def _recent_misses(self, h: Hypothesis, index: int) -> set[int]:
         return set(range(index - h.misses + 1, index + 1))
 
     def _confirm(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> str:
@@ -300,7 +153,7 @@ class MapLocalizer:
         for pose in places:
             pose, score, _ = self._refine(points, np.asarray(pose, dtype=np.float64))
             if score >= MIN_SCORE:
-                h = _Hypothesis(pose, index, stamp_ns=stamp_ns)
+                h = Hypothesis(pose, index, stamp_ns=stamp_ns)
                 h.poses[index] = pose.copy()
                 h.matched.add(index)
                 h.scores.append(score)
@@ -310,7 +163,7 @@ class MapLocalizer:
                 self.hypotheses.append(h)
         if self._continued is not None:  # the lost pose, moved by the motion since, competes with the places
             lost, self._continued = self._continued, None
-            h = _Hypothesis(lost.pose.copy(), index, stamp_ns=stamp_ns, continued=True, anchor=lost.anchor,
+            h = Hypothesis(lost.pose.copy(), index, stamp_ns=stamp_ns, continued=True, anchor=lost.anchor,
                             recent=lost.recent)
             self._follow(h, index, stamp_ns, points, odom, wide=True)
             if h.misses == 0:
@@ -338,9 +191,9 @@ class MapLocalizer:
         self._lost_since = None
         return True
 
-    def _distinct(self, hypotheses: list[_Hypothesis]) -> list[_Hypothesis]:
+    def _distinct(self, hypotheses: list[Hypothesis]) -> list[Hypothesis]:
         """Hypotheses that came to the same place are one (the better scoring one)."""
-        kept: list[_Hypothesis] = []
+        kept: list[Hypothesis] = []
         for h in sorted(hypotheses, key=lambda h: -float(np.mean(h.evidence[-CONFIRM_SCANS:]))):
             if all(not _near(h.pose, k.pose, SEPARATION) for k in kept):
                 kept.append(h)
@@ -348,7 +201,7 @@ class MapLocalizer:
 
     # -- matching -------------------------------------------------------------------------------
 
-    def _follow(self, h: _Hypothesis, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None,
+    def _follow(self, h: Hypothesis, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None,
                 wide: bool = False) -> float:
         """Move hypothesis ``h`` to scan ``index``: its prior from the odometry since its last good match (or its
         recent velocity), matched against the map (``wide``: a wide local search first)."""
@@ -358,7 +211,7 @@ class MapLocalizer:
         # Carried by an unbroken motion, the robot is searched for around the prior only every SEARCH_EVERY_SCANS,
         # and only once the scan moved since a search found nothing.
         search = not (bounded and (h.coasting % SEARCH_EVERY_SCANS or not self._moved(h.searched_at, points, odom)))
-        bound = _Bound(prior, sd, h.loose_m, h.loose_dir) if bounded else None
+        bound = Bound(prior, sd, h.loose_m, h.loose_dir) if bounded else None
         pose, score, loose = self._match(points, prior, sd, wide, far=not off_map, bound=bound, search=search)
         jump = se2_between(prior, pose)
         if h is self.committed and score >= self._poor() and (
@@ -397,7 +250,7 @@ class MapLocalizer:
         h.stamp_ns = stamp_ns
         return score
 
-    def _prior(self, h: _Hypothesis, stamp_ns: int, odom: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    def _prior(self, h: Hypothesis, stamp_ns: int, odom: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
         """Where ``h`` should be at ``stamp_ns`` and the standard deviations (3,) of that (None: unknown): its
         last good pose moved by the odometry since (noise growing with the motion), else by its velocity over at
         least VELOCITY_SPAN_S of good matches (a scan stamped out of order moves back along it)."""
@@ -417,8 +270,8 @@ class MapLocalizer:
         return h.pose.copy(), None
 
     def _match(self, points: np.ndarray, prior: np.ndarray, sd: np.ndarray | None,
-               wide: bool = False, far: bool = True, bound: _Bound | None = None,
-               search: bool = True) -> _Fit:
+               wide: bool = False, far: bool = True, bound: Bound | None = None,
+               search: bool = True) -> Fit:
         """The scan's pose near ``prior`` (standard deviations ``sd`` (3,), None when the motion is unknown) and
         its score: NDT on the map held by the prior (along a corridor the motion decides); a window search
         when the motion is unknown, or when NDT's result is poor or far from the prior; a wide local search
@@ -436,7 +289,7 @@ class MapLocalizer:
                     return self._checked(points, held, bound)
             elif held[1] < self._far_needed(sd) or (bound is not None and not bound.holds(held[0])):
                 # NDT slid away, and nothing says the motion was wrong
-                held = _Fit(prior.copy(), self.fine.score(points, prior), None)
+                held = Fit(prior.copy(), self.fine.score(points, prior), None)
         best = held
         windows = (LOCAL_WINDOW,) if wide else (WINDOW, LOCAL_WINDOW) if far else (WINDOW,)
         if bound is not None:
@@ -469,7 +322,7 @@ class MapLocalizer:
                 best = searched
         return best
 
-    def _checked(self, points: np.ndarray, held: _Fit, bound: _Bound | None) -> _Fit:
+    def _checked(self, points: np.ndarray, held: Fit, bound: Bound | None) -> Fit:
         """NDT held by the motion matched the scan, but worse than the robot typically matches: where a map
         does not fix the position (along a corridor) the prior holds NDT wherever the motion put it, also when
         the motion drifts. The window search around it, refined by the scan alone, is taken when it scores
@@ -507,7 +360,7 @@ class MapLocalizer:
         return max(self._poor() if sd is None else FIX_SCORE, RECOVER_RATIO * self._typical())
 
     def _refine(self, points: np.ndarray, start: np.ndarray, prior: np.ndarray | None = None,
-                sd: np.ndarray | None = None) -> _Fit:
+                sd: np.ndarray | None = None) -> Fit:
         """NDT against the map from ``start`` (a MAP estimate with the Gaussian ``prior``/``sd`` when given): the
         pose, the raster's score there, and the direction the map does not fix the position in (the weak direction
         of NDT's translational Hessian: along a bare corridor), if any; the start is kept when NDT lands clearly
@@ -517,10 +370,10 @@ class MapLocalizer:
         refined = np.asarray(result.pose, dtype=np.float64)
         score, before = self.fine.score(points, refined), self.fine.score(points, start)
         if score < before - DIVERGED_SCORE:
-            return _Fit(start, before, None)
+            return Fit(start, before, None)
         values, vectors = np.linalg.eigh(0.5 * (result.hessian[:2, :2] + result.hessian[:2, :2].T))
         loose = None if values[1] > 0 and values[0] >= CONSTRAINED_RATIO * values[1] else vectors[:, 0]
-        return _Fit(refined, score, loose)
+        return Fit(refined, score, loose)
 
     def through_walls(self, points: np.ndarray, pose: np.ndarray) -> float:
         """The share of the scan's beams (``points`` (M, 2) their returns in the base frame, from ``sensor_xy``)
@@ -569,57 +422,6 @@ class MapLocalizer:
         """The median score over the last USUAL_SCANS well matched scans: how well this map explains the scans
         where it knows the place (a stretch it saw only from afar lowers the typical score, not this)."""
         return self.usual.median()
-
-
-class _RecentScores:
-    """The last ``n`` scores of well matched scans and their median (0.0 for none), kept until the next score:
-    the tracker asks for it several times a scan."""
-
-    def __init__(self, n: int) -> None:
-        self.values: deque[float] = deque(maxlen=n)
-        self._median: float | None = None
-
-    def append(self, score: float) -> None:
-        self.values.append(score)
-        self._median = None
-
-    def extend(self, scores: list[float]) -> None:
-        self.values.extend(scores)
-        self._median = None
-
-    def median(self) -> float:
-        if self._median is None:
-            self._median = float(np.median(self.values)) if self.values else 0.0
-        return self._median
-
-
-class _Bound(NamedTuple):
-    """Where a robot whose motion went on unbroken since its last good match can be: within BOUND_SIGMAS of the
-    ``prior`` [x, y, theta] with standard deviations ``sd`` (3,), widened along ``loose_dir`` (unit, map frame: a
-    corridor the matches since did not fix the position along) by ODOM_NOISE_RATIO of the ``loose_m`` travelled."""
-
-    prior: np.ndarray
-    sd: np.ndarray
-    loose_m: float
-    loose_dir: np.ndarray | None
-
-    def covariance(self) -> np.ndarray:
-        """(2, 2) of the position, map frame (m^2)."""
-        P = self.sd[0] ** 2 * np.eye(2)
-        if self.loose_dir is not None:
-            P = P + (ODOM_NOISE_RATIO * self.loose_m) ** 2 * np.outer(self.loose_dir, self.loose_dir)
-        return P
-
-    def holds(self, pose: np.ndarray) -> bool:
-        """Is ``pose`` [x, y, theta] within the bound?"""
-        d = np.asarray(pose[:2], dtype=np.float64) - self.prior[:2]
-        turn = abs(se2_between(self.prior, pose)[2])
-        return bool(d @ np.linalg.solve(self.covariance(), d) <= BOUND_SIGMAS**2 and turn <= BOUND_SIGMAS * self.sd[2])
-
-    def reach(self) -> np.ndarray:
-        """The search window (x, y, theta half-widths, the prior's frame) that covers the bound."""
-        extent = BOUND_SIGMAS * math.sqrt(float(np.linalg.eigvalsh(self.covariance())[1]))
-        return np.array([extent, extent, BOUND_SIGMAS * self.sd[2]])
 
 
 def _median_range(points: np.ndarray) -> float:

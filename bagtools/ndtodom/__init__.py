@@ -1,8 +1,7 @@
 """Laser odometry by 2D NDT scan matching (``bagtools ndt-odom``)."""
 
-from bagtools.odometry.pipeline import (
-    INIT_MODES, REFERENCE_MODES, NdtOdomOptions, NdtOdomPipeline, NdtOdomResult, run_front_end,
-)
+from bagtools.odometry.options import INIT_MODES, REFERENCE_MODES, NdtOdomOptions
+from bagtools.odometry.pipeline import NdtOdomPipeline, NdtOdomResult, run_front_end
 from bagtools.ndtodom.plots import render_scan_map_png, render_trajectories_png, scans_in_frame
 from bagtools.ndtodom.writer import NDT_ODOM_FILES, write_ndt_odom
 

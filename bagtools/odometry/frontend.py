@@ -1,83 +1,11 @@
 """Laser odometry that holds on real recordings: guesses, gating, a search when a guess cannot be trusted.
 
-:class:`LaserOdometry` registers scans one at a time (the KISS-ICP way: the
-pipeline iterates a dataset and feeds one small algorithm object). For each
-scan, in the robot base frame:
-
-1. **Guesses** of its pose: the wheel odometry's motion since the previous scan
-   (when the bag has odometry), constant velocity (the motion over the last
-   ``VELOCITY_SPAN_S`` or more, whose stamps a jittering clock cannot throw
-   off as it does one step's, scaled to the time step, never beyond what the
-   robot can do in it: ``max_speed_mps``, ``max_turn_rate_radps``), and no
-   motion. A robot keeps a speed for about ``MOTION_MEMORY_S``: a longer step
-   (a log that writes a scan per metre, a pause, a gap) is taken as that long
-   at the recent speed, and the speed of a longer span as its distance over
-   that time, so that a wait of minutes predicts neither minutes of travel nor
-   none.
-2. **NDT** from the first guess (odometry if there is one) against the current
-   keyframe. The other guesses are tried too when they lie outside that
-   result's basin; results that disagree mean several minima.
-3. **Search** when a guess cannot be trusted: no good score, disagreeing
-   results, a long time gap, or no odometry and a motion larger than NDT's
-   basin. :func:`~bagtools.scan_matching.match_scans_grid` (correlative branch and bound)
-   searches a window around the best result that covers what the robot can
-   have done since the previous scan (or, with trusted odometry, what the
-   odometry's error can be), and NDT refines its result. When even that
-   scores poorly, the window of what the robot can have done is searched:
-   with odometry, its best match on the submap; without, every distinct
-   correlative peak (:func:`~bagtools.scan_matching.match_scans_grid_peaks`) on a larger
-   submap, and the prior's own place at headings across what the robot can
-   turn on the way there (``CV_TURN_PER_M`` per metre, two sigmas: a metre is
-   enough to turn into a side corridor, and a scan that turns into new walls
-   scores low on the correlative field while NDT from near it finds it),
-   since a scene that repeats (a parallel corridor, the mirror image of a
-   junction after a sharp turn) can match a small submap better than the
-   place itself; without odometry, a time step longer than ``max_gap_s``
-   searches that window too (constant velocity says little after seconds).
-   The best normalized NDT score, less the prior's cost (the motion model:
-   speed, arcs, and never beyond max speed and turn rate), wins, unless a
-   match in another place comes within ``CONTEST_MARGIN`` of it (or at all,
-   without odometry, when the scans lie so far apart that the wide search
-   starts at several headings: then much of each scan sees walls no keyframe
-   saw, and the voxel-filtered score that shortlists, which weighs far returns
-   most, cannot rank places): then each is
-   scored on the submap as a fine likelihood field (``match_scans_grid`` at
-   ``FINE_SCORE_RESOLUTION_M``), less what the robot's reach makes of it, and
-   a margin of ``AMBIGUOUS_MARGIN`` on that score decides. Without odometry, a
-   scan whose stamp is suspect (a step under ``SHORT_STEP_RATIO`` of the usual
-   one, or the step after it) and that matches nothing well within reach is
-   searched in the largest window with no reach (counted as ``beyond_reach``).
-   A scan of fewer than ``MIN_WIDE_POINTS`` points is never searched wide: a
-   dozen returns fit somewhere in any large window.
-   A scan stamped before the scan registered before it (the log stamped it out
-   of the order it was recorded in, which the scans arrive in) has a stamp
-   that says nothing of when it was taken: it is taken as the next scan of its
-   laser, one typical time step later, and is never searched beyond reach.
-4. **Refinement**: when the scene's NDT cells are large (long ranges: cells
-   of 1/sqrt(2) of them are at least ``MIN_REFINE_CELL_M``), NDT refines the
-   winner once more on the keyframe's submap with those finer cells, the next
-   level of a multi-resolution NDT: one grid's discretization no longer
-   decides the last centimetres. A refinement that moves the pose by more than
-   ``REFINE_MAX_M``/``REFINE_MAX_RAD`` is not taken, and its move along a
-   direction the finer cells barely constrain (a corridor: their cost's
-   curvature there under ``DEGENERATE_RATIO`` of the largest) is dropped: the
-   first match's motion prior decided that direction, and on the flat fine
-   cost the pose would slide along the corridor on noise.
-5. **Checks**: a score below ``min_score`` keeps the guess (a fallback,
-   counted); an odometry motion the match contradicts beyond its noise is
-   counted as a rejected odometry sample; a step faster than the robot could
-   move is counted; a choice between two distinct places (farther apart than
-   NDT's basin) that even the fine score tells apart by less than
-   ``AMBIGUOUS_MARGIN`` is counted as ambiguous (a repeating scene, or scans
-   that overlap too little: a wrong choice there is as confident as a right
-   one), and its covariance widened by ``AMBIGUOUS_COVARIANCE`` so that a pose
-   graph can bend there. :meth:`LaserOdometry.warnings` says each kind once,
-   with counts.
-6. **Keyframes**: a scan becomes the reference once the robot has moved
-   ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the keyframe,
-   or the score fell below ``keyframe_score_ratio`` of the keyframe's first.
-
-Poses are planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
+:class:`LaserOdometry` registers scans one at a time (the KISS-ICP way). Each scan, in the robot base frame: guesses
+(odometry, constant velocity, no motion), NDT from them on the keyframe's submap, a correlative search when no guess
+can be trusted, a refinement on finer cells, checks (an ambiguous step's covariance is widened so that a pose graph can
+bend there), keyframes. One objective weighs every candidate: the scan's fit less the motion prior's cost
+(:mod:`bagtools.odometry.prior`). ``docs/commands/ndt-odom.md`` ("How a scan is registered") has each step and the
+settings (:mod:`bagtools.odometry.options`). Poses: planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
 """
 
 from __future__ import annotations
@@ -92,88 +20,25 @@ from bagtools.odometry.motion import (  # the motion model, shared with the loca
     CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO, MOTION_MEMORY_S, STAMP_JITTER_S, VELOCITY_SPAN_S,
     odometry_sd, steady_velocity_sd,
 )
-from bagtools.odometry.options import FrontEndOptions, normalized_score
+from bagtools.odometry.options import (  # the method's fixed settings
+    AGREE_M, AGREE_RAD, AMBIGUOUS, AMBIGUOUS_COVARIANCE, AMBIGUOUS_MARGIN, AMBIGUOUS_WARN_SHARE, BASIN_M, BASIN_RAD,
+    BEYOND_REACH, BEYOND_REACH_GAIN, CONTEST_MARGIN, CONTINUITY_SCORE_RATIO, CV_TURN_PER_M, DEGENERATE_RATIO,
+    FALLBACK, FINE_SCORE_RESOLUTION_M, FINE_SCORE_WINDOW, MAX_SEARCH_M, MIN_REFINE_CELL_M, MIN_WIDE_POINTS,
+    ODOM_REJECTED, REFINE_CELL_RATIO, REFINE_MAX_M, REFINE_MAX_RAD, SEARCHED, SEARCH_SIGMAS, SHORT_STEP_RATIO,
+    SUBMAP_RADIUS_M, TOO_FAST, WIDE_MAX_PRIOR_COST, WIDE_PEAKS, WIDE_PEAK_RATIO, WIDE_SUBMAP_KEYFRAMES,
+    FrontEndOptions, normalized_score
+)
 from bagtools.odometry.prior import (
     COVARIANCE_FLOOR, CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
 )
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
+from bagtools.scan_matching.grid import voxel_mean
 from bagtools.transforms import wrap_to_pi
 # single poses in the loop body, tens of calls per scan: without numpy's per-call overhead on 3-vectors
 from bagtools.transforms.planar import se2_between_fast as _between
 from bagtools.transforms.planar import se2_compose_fast as _compose
-
-
-# Counter keys (summary.json) and their one-line explanations (warnings).
-SEARCHED = "searched"
-FALLBACK = "fallback"
-ODOM_REJECTED = "odometry_rejected"
-TOO_FAST = "faster_than_robot"
-AMBIGUOUS = "ambiguous"
-BEYOND_REACH = "beyond_reach"
-#: A step is ambiguous when another place scores within this much of the chosen one (normalized score less the
-#: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
-AMBIGUOUS_MARGIN = 0.05
-AMBIGUOUS_WARN_SHARE = 0.03
-#: Candidates in distinct places whose objectives are within CONTEST_MARGIN of the best are decided on a finer
-#: grid: each is scored as a likelihood field of the keyframe's submap at FINE_SCORE_RESOLUTION_M (the best pose
-#: within FINE_SCORE_WINDOW of it), less the cost of the motion under what the robot can do (the prior's wide
-#: part: the narrow part's preference already shortlisted them). Coarse NDT cells blur what tells a sharp turn or
-#: a half-seen room or a corridor's doors from a look-alike; a fine grid does not.
-CONTEST_MARGIN = 0.1
-#: How much a robot's heading may change per metre travelled (rad/m, one sigma) beyond constant velocity's turn: the
-#: wide search starts NDT at headings across it (a robot turns into a side corridor within a metre).
-CV_TURN_PER_M = 0.3
-FINE_SCORE_RESOLUTION_M = 0.05
-FINE_SCORE_WINDOW = (0.1, 0.1, 0.02)
-#: Added to an ambiguous step's covariance (m^2, m^2, rad^2): the other place may be the right one, and a pose
-#: graph built on the steps must be free to bend there (and to search loops across it widely).
-AMBIGUOUS_COVARIANCE = np.diag([0.3**2, 0.3**2, 0.5**2])
-
-
-#: A step whose match scores under this share of the typical score does not show the scene going on from the
-#: keyframe's (``ScanStep.trusted`` is False): a robot carried away matches nothing of it (a fallback, at 0.1 of the
-#: typical score on simulated kidnaps), while a scan merely harder to match scores 0.6 of it or more.
-CONTINUITY_SCORE_RATIO = 0.5
-#: A scan of fewer points (voxel-filtered) is not searched beyond the prior's window: a dozen returns fit somewhere in
-#: any large window as well as at the place, and could not overrule the motion model.
-MIN_WIDE_POINTS = 20
-#: Keyframes of the submap lie within this distance of the newest one (m).
-SUBMAP_RADIUS_M = 10.0
-#: The search window spans this many prior sigmas (never more than MAX_SEARCH_M).
-SEARCH_SIGMAS = 3.0
-MAX_SEARCH_M = 3.0
-#: The refinement's cells are this share of the matching cells (half the area), when at least MIN_REFINE_CELL_M;
-#: it may move the pose by at most REFINE_MAX_M and REFINE_MAX_RAD.
-REFINE_CELL_RATIO = 1.0 / math.sqrt(2.0)
-MIN_REFINE_CELL_M = 0.5
-REFINE_MAX_M, REFINE_MAX_RAD = 0.2, 0.05
-#: Where the finer grid barely constrains a direction of translation (its Hessian's eigenvalues there under this
-#: share of the largest: a corridor), the refinement's move along it is not taken: the fine cost is flat there,
-#: and the pose would slide along the corridor on noise (the coarse match's prior decided that direction).
-DEGENERATE_RATIO = 0.02
-#: The wide search (what the robot can have done) matches against the keyframes within SUBMAP_RADIUS_M, up to this
-#: many: after a sharp turn or a gap the scan may see what only older keyframes saw, and a small submap can match a
-#: repeated scene (a parallel corridor, the mirror image of a junction) better than the place itself.
-WIDE_SUBMAP_KEYFRAMES = 15
-#: Its distinct correlative peaks (at least this share of the best) are refined by NDT and weighed by the prior.
-WIDE_PEAKS, WIDE_PEAK_RATIO = 8, 0.6
-#: A peak whose prior cost (weighted, in normalized score) exceeds this could not win: it is not refined.
-WIDE_MAX_PRIOR_COST = 0.5
-#: Without odometry, when every match within reach scores below the trust score and the time step is shorter
-#: than SHORT_STEP_RATIO of the recent typical one (its stamp is suspect: a log resampled from another clock puts
-#: 0.15 s on a 30-degree turn), the largest window (MAX_SEARCH_M, any heading, around the previous pose) is
-#: searched with no reach at all. A match there is taken when it scores at least the trust score and
-#: BEYOND_REACH_GAIN more than the best within reach.
-SHORT_STEP_RATIO = 0.25
-BEYOND_REACH_GAIN = 0.2
-
-
-#: Guesses closer than this to a result (m, rad) lie in its basin: NDT from them would end there too.
-BASIN_M, BASIN_RAD = 0.15, 0.1
-#: Two results closer than this (m, rad) agree.
-AGREE_M, AGREE_RAD = 0.05, 0.02
 
 
 @dataclass
@@ -217,7 +82,7 @@ class LaserOdometry:
         """Add one scan: (N,2) valid returns in the base frame, and the odometry pose at its stamp if known."""
         points_base = np.asarray(points_base, dtype=np.float64)
         odom = None if odom_pose is None else np.asarray(odom_pose, dtype=np.float64)
-        sparse = _voxel_filter(points_base, self.options.voxel_m)
+        sparse = voxel_mean(points_base, self.options.voxel_m)
         if not self.run.steps:
             step = self._first(stamp_ns, points_base, odom)
         else:
@@ -633,16 +498,3 @@ def _constrained(move: np.ndarray, hessian: np.ndarray) -> np.ndarray:
 def _close(a: np.ndarray, b: np.ndarray, tol_m: float, tol_rad: float) -> bool:
     d = _between(a, b)
     return bool(np.hypot(d[0], d[1]) <= tol_m and abs(d[2]) <= tol_rad)
-
-
-def _voxel_filter(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """One point (the mean) per square voxel of side ``voxel_m``: near walls, where a scanner's beams crowd,
-    stop outweighing the far features that tell one place in a corridor from the next."""
-    if voxel_m <= 0 or len(points) == 0:
-        return points
-    keys = np.floor(points / voxel_m).astype(np.int64)
-    _, voxel, counts = np.unique(keys[:, 0] * 4_000_037 + keys[:, 1], return_inverse=True, return_counts=True)
-    sums = np.zeros((counts.size, 2))
-    np.add.at(sums, voxel.reshape(-1), points)
-    return sums / counts[:, None]
-

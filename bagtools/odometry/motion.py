@@ -10,7 +10,6 @@ Poses and motions are planar [x, y, theta] (m, m, rad).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

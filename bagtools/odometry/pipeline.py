@@ -17,7 +17,6 @@ odometry, or moved faster than the robot can; warnings say each kind once.
 
 from __future__ import annotations
 
-import math
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
@@ -33,99 +32,23 @@ from bagtools.io import (
 from bagtools.io.cdr import odometry_from_cdr
 from bagtools.io.decode import OdometrySample
 from bagtools.odometry.frontend import LaserOdometry
-from bagtools.odometry.options import GUESSES, VOXEL_PER_CELL, FrontEndOptions, cell_size_for
+from bagtools.odometry.options import NdtOdomOptions, cell_size_for
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.scan_matching import MIN_SCAN_POINTS
-from bagtools.scan_matching.grid import CELL_MODELS
 from bagtools.progress import progress
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer, TransformException
 from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING, repair_dynamic_tf
-from bagtools.trajectory import ErrorStats, Trajectory, ape_translation, rpe_frames, rpe_translation
-from bagtools.transforms import pose2tform, tform2pose
+from bagtools.trajectory import Trajectory
+from bagtools.trajectory.evaluate import odometry_errors
+from bagtools.transforms import pose2tform, quat2xyzw, tform2pose, tform2quat
 
-INIT_MODES = ("auto", *GUESSES)
 #: Returns farther than this are not matched (m): no 2D laser places the robot better by them than by its near
 #: returns, and the search's rasters are sized by the farthest point (500 m returns needed 100 M cells).
 MATCH_MAX_RANGE_M = 100.0
 #: Repeated (frozen) scans are warned about when the odometry moves more than this meanwhile (m).
 FROZEN_SCANS_MOVED_M = 0.5
-REFERENCE_MODES = ("previous", "keyframe")
-#: What no ground robot does (m/s, rad/s): a --max-speed or --max-turn-rate beyond is a typo, not a robot.
-MAX_PLAUSIBLE_SPEED_MPS, MAX_PLAUSIBLE_TURN_RATE_RADPS = 100.0, 50.0
 ODOM_TOPIC = "/odom"
-
-
-@dataclass(frozen=True)
-class NdtOdomOptions:
-    """How to run laser odometry (the defaults are the ones to use; the rest is for experts).
-
-    ``init``: the guess NDT starts from first ('auto': the odometry when the bag
-    has it, else constant velocity). ``search``: allow the grid search when a
-    guess cannot be trusted. ``use_odometry``: False ignores the bag's wheel
-    odometry. ``cell_size_m``: NDT cell side (m), None for one suited to the
-    scans (:func:`~bagtools.odometry.options.cell_size_for`). ``cell_model``: 'widened'
-    (see :mod:`bagtools.scan_matching.grid`) or 'paper'. ``min_score``: normalized score
-    in [0, 1] below which a match falls back to its guess.
-    ``scan_frame_offset``: (x m, y m, yaw rad) of the laser on the robot base,
-    overriding (or standing in for) tf. ``max_speed_mps`` and
-    ``max_turn_rate_radps``: what the robot can do (bounds constant velocity
-    and the search). ``wheeled``: False for a handheld or flying laser (its
-    steps need not run along arcs, see :class:`~bagtools.odometry.options.FrontEndOptions`).
-    """
-
-    topic: str = "/scan"
-    init: str = "auto"
-    search: bool = True
-    use_odometry: bool = True
-    reference: str = "keyframe"
-    cell_size_m: float | None = None
-    cell_model: str = "widened"
-    min_score: float = 0.1
-    keyframe_distance_m: float = 0.5
-    keyframe_angle_rad: float = 0.35
-    keyframe_score_ratio: float = 0.7
-    scan_frame_offset: tuple[float, float, float] | None = None
-    max_speed_mps: float = FrontEndOptions.max_speed_mps
-    max_turn_rate_radps: float = FrontEndOptions.max_turn_rate_radps
-    wheeled: bool = True
-    max_iterations: int = 100
-
-    def __post_init__(self) -> None:
-        if self.init not in INIT_MODES:
-            raise BagtoolsError(f"--init must be one of {', '.join(INIT_MODES)}, got {self.init!r}")
-        if self.reference not in REFERENCE_MODES:
-            raise BagtoolsError(f"--reference must be one of {', '.join(REFERENCE_MODES)}, got {self.reference!r}")
-        if self.cell_size_m is not None and not (np.isfinite(self.cell_size_m) and self.cell_size_m > 0):
-            raise BagtoolsError(f"--cell-size must be a positive number of metres, got {self.cell_size_m}")
-        if self.cell_model not in CELL_MODELS:
-            raise BagtoolsError(f"--cell-model must be one of {', '.join(CELL_MODELS)}, got {self.cell_model!r}")
-        if not 0.0 <= self.min_score <= 1.0:
-            raise BagtoolsError(f"--min-score must be in [0, 1] (a normalized NDT score), got {self.min_score}")
-        if self.keyframe_distance_m <= 0 or self.keyframe_angle_rad <= 0 or not 0 <= self.keyframe_score_ratio <= 1:
-            raise BagtoolsError("keyframe thresholds must be positive (score ratio in [0, 1])")
-        if self.scan_frame_offset is not None and (len(self.scan_frame_offset) != 3
-                                                   or not np.isfinite(self.scan_frame_offset).all()):
-            raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
-        for name, flag, most in (("max_speed_mps", "--max-speed", MAX_PLAUSIBLE_SPEED_MPS),
-                                 ("max_turn_rate_radps", "--max-turn-rate", MAX_PLAUSIBLE_TURN_RATE_RADPS)):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0 < value <= most):
-                raise BagtoolsError(f"{flag} must be a positive number no robot exceeds (at most {most:g}), got {value}")
-        if self.max_iterations < 1:
-            raise BagtoolsError(f"max_iterations must be at least 1, got {self.max_iterations}")
-
-    def front_end(self, cell_size_m: float) -> FrontEndOptions:
-        """The settings of the :class:`~bagtools.odometry.frontend.LaserOdometry` these options ask for
-        (``cell_size_m`` when the options leave it to the scans)."""
-        cell = self.cell_size_m if self.cell_size_m is not None else cell_size_m
-        return FrontEndOptions(init=self.init, search=self.search, reference=self.reference,
-                               cell_size_m=cell, voxel_m=cell * VOXEL_PER_CELL, cell_model=self.cell_model,
-                               min_score=self.min_score,
-                               keyframe_distance_m=self.keyframe_distance_m, keyframe_angle_rad=self.keyframe_angle_rad,
-                               keyframe_score_ratio=self.keyframe_score_ratio, max_speed_mps=self.max_speed_mps,
-                               max_turn_rate_radps=self.max_turn_rate_radps, wheeled=self.wheeled,
-                               max_iterations=self.max_iterations)
 
 
 @dataclass
@@ -503,7 +426,8 @@ class NdtOdomPipeline:
         else:
             self.warnings.append(f"ground truth is of {gt_child}, which tf does not connect to {base}: not evaluated")
             return None, {}
-        truth_buffer = TfBuffer.from_arrays(_tf_arrays("map", "truth", stamps_gt, T_map_gt @ T_gt_base))
+        truth_buffer, T_map_truth = TfBuffer(), T_map_gt @ T_gt_base
+        truth_buffer.set_transform("map", "truth", stamps_gt, T_map_truth[:, :3, 3], quat2xyzw(tform2quat(T_map_truth)))
         T_map_start, ok = truth_buffer.lookup("map", "truth", trajectory.stamps_ns[:1], return_mask=True)
         if not ok[0]:
             self.warnings.append("ground truth does not cover the first scan's stamp: not evaluated")
@@ -518,25 +442,8 @@ class NdtOdomPipeline:
             "rpe_translation_m_per_1m": "evo_rpe tum ground_truth.tum <trajectory> --delta 1 --delta_unit m",
         }}
         for name, est in (("ndt", trajectory), ("odometry", odometry)):
-            if est is None:
-                continue
-            entry: dict = {}
-            try:
-                entry["ape_translation_m"] = ape_translation(ground_truth, est).as_dict()
-            except BagtoolsError as err:
-                entry["ape_translation_m"] = {"unavailable": err.problem}
-            try:
-                entry["rpe_translation_m_per_1m"] = rpe_translation(ground_truth, est, delta_m=1.0).as_dict()
-            except BagtoolsError as err:
-                entry["rpe_translation_m_per_1m"] = {"unavailable": err.problem}
-            try:
-                trans, rot = rpe_frames(ground_truth, est, delta=1)
-                entry["rpe_per_scan"] = {"translation_m": ErrorStats.of(trans).as_dict(),
-                                         "rotation_deg": ErrorStats.of(rot).as_dict(),
-                                         "steps_over_0_2m": int(np.count_nonzero(trans > 0.2))}
-            except BagtoolsError as err:
-                entry["rpe_per_scan"] = {"unavailable": err.problem}
-            result[f"errors_{name}"] = entry
+            if est is not None:
+                result[f"errors_{name}"] = odometry_errors(ground_truth, est)
         return ground_truth, result
 
     def _summary(self, front: LaserOdometry | None, elapsed_s: float) -> dict:
@@ -573,15 +480,6 @@ class NdtOdomPipeline:
                                                "median": float(np.median(scores))}
                 summary["time_per_pair_ms"] = {"mean": 1e3 * elapsed_s / scores.size, "total_s": elapsed_s}
         return summary
-
-
-def _tf_arrays(parent: str, child: str, stamps_ns: np.ndarray, T: np.ndarray) -> TfArrays:
-    """Poses T (N,4,4) of ``child`` in ``parent`` as TfArrays (ROS x, y, z, w quaternions)."""
-    from bagtools.transforms import quat2xyzw, tform2quat
-
-    n = len(stamps_ns)
-    return TfArrays(np.full(n, parent, dtype=object), np.full(n, child, dtype=object),
-                    np.asarray(stamps_ns, dtype=np.int64), T[:, :3, 3].copy(), quat2xyzw(tform2quat(T)))
 
 
 def run_front_end(bag_path: str | Path, options: NdtOdomOptions | None = None, keep_scans: bool = False) -> NdtOdomResult:

@@ -33,11 +33,11 @@ class ScanStep:
             seeded NDT), or "fallback" (no match could be trusted: the guess was kept).
         keyframe: this scan became the reference for the scans after it.
         ambiguous: another place, outside NDT's basin, matched almost as well (see
-            :data:`bagtools.odometry.frontend.AMBIGUOUS_MARGIN`): the step may be wrong, and its
-            ``covariance`` says so (:data:`bagtools.odometry.frontend.AMBIGUOUS_COVARIANCE` added).
+            :data:`bagtools.odometry.options.AMBIGUOUS_MARGIN`): the step may be wrong, and its
+            ``covariance`` says so (:data:`bagtools.odometry.options.AMBIGUOUS_COVARIANCE` added).
         trusted: the scene went on from the keyframe's, so the robot was not carried away between them: no
             fallback, no jump beyond reach, not ambiguous, and a score of at least
-            :data:`bagtools.odometry.frontend.CONTINUITY_SCORE_RATIO` of the typical.
+            :data:`bagtools.odometry.options.CONTINUITY_SCORE_RATIO` of the typical.
     """
 
     stamp_ns: int

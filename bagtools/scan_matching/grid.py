@@ -198,3 +198,15 @@ class NdtReference:
 # Grid g is shifted by half a cell in x when g is 1 or 3, in y when g is 2 or 3.
 _SHIFT_X = np.array([0, 1, 0, 1])
 _SHIFT_Y = np.array([0, 0, 1, 1])
+
+
+def voxel_mean(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """One point (the mean) per square voxel of side ``voxel_m`` of (N,2) ``points`` (m): near walls, where a
+    scanner's beams crowd, stop outweighing the far features that tell one place in a corridor from the next."""
+    if voxel_m <= 0 or len(points) == 0:
+        return points
+    keys = np.floor(points / voxel_m).astype(np.int64)
+    _, voxel, counts = np.unique(keys[:, 0] * 4_000_037 + keys[:, 1], return_inverse=True, return_counts=True)
+    sums = np.zeros((counts.size, 2))
+    np.add.at(sums, voxel.reshape(-1), points)
+    return sums / counts[:, None]

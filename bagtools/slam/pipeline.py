@@ -47,7 +47,8 @@ from bagtools.grid import OccupancyGrid
 from bagtools.grid.options import MAX_RESOLUTION, MIN_RESOLUTION, GridMapOptions
 from bagtools.grid.pipeline import GridMapPipeline
 from bagtools.io import LASERSCAN_TYPES, open_bag
-from bagtools.odometry.pipeline import NdtOdomOptions, NdtOdomResult, run_front_end
+from bagtools.odometry.options import NdtOdomOptions
+from bagtools.odometry.pipeline import NdtOdomResult, run_front_end
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph.backend import BackEndOptions, BackEndResult, build_pose_graph
 from bagtools.pose_graph.loops import ACCEPTED, LoopOptions

@@ -5,7 +5,8 @@
 stamps at once; the exceptions are tf2's.
 """
 
-from bagtools.tf.buffer import TfBuffer, format_stamp
+from bagtools.tf.buffer import TfBuffer
+from bagtools.tf.track import format_stamp
 from bagtools.tf.exceptions import (
     BackwardExtrapolationException,
     ConnectivityException,

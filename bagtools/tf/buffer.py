@@ -30,22 +30,19 @@ walk to the root reduces to.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from bagtools.tf import _rigid
-from bagtools.tf._rigid import Rigid
 from bagtools.tf.exceptions import (
-    BackwardExtrapolationException,
     ConnectivityException,
     ExtrapolationException,
-    ForwardExtrapolationException,
     InvalidArgumentException,
     LookupException,
-    NoDataForExtrapolationException,
 )
+from bagtools.tf.track import FrameSamples, Track, as_stamps, compose_up, format_stamp, strip_ids
+from bagtools.tf.walk import Failure, LookupWalk
 
 # tf2's tolerance on | |q|^2 - 1 | for an accepted quaternion.
 QUATERNION_NORMALIZATION_TOLERANCE = 10e-3
@@ -56,166 +53,11 @@ QUATERNION_NORMALIZATION_TOLERANCE = 10e-3
 #: transform would collapse a map, a grid or a picture to no extent (or a NaN one) wherever it is used.
 MAX_TRANSLATION_M = 1.0e9
 
-_OK, _PAST, _FUTURE, _SINGLE = 0, 1, 2, 3
-
 # Stamps resolved per block of a batch lookup (sized for the CPU cache).
 _BLOCK = 1 << 15
 
 
-def format_stamp(stamp_ns: int) -> str:
-    """Seconds with 6 decimals, as tf2's displayTimePoint (rounded from exact int ns)."""
-    sign = "-" if stamp_ns < 0 else ""
-    micros = (abs(int(stamp_ns)) + 500) // 1000
-    return f"{sign}{micros // 1_000_000}.{micros % 1_000_000:06d}"
-
-
-@dataclass
-class _Track:
-    """The compiled samples of one child frame (M samples, M-1 intervals)."""
-
-    stamps: np.ndarray        # (M,) int64, strictly increasing
-    parent: np.ndarray        # (M,) int64 frame ids
-    q: np.ndarray             # (4, M) unit quaternions x, y, z, w
-    t: np.ndarray             # (3, M) metres
-    static: bool
-    duration: np.ndarray = field(init=False)       # (M-1,) float64 ns between neighbours
-    q_next: np.ndarray = field(init=False)         # (4, M-1) q[:, j+1], sign-flipped onto q[:, j]'s hemisphere
-    omega_over_pi: np.ndarray = field(init=False)  # (M-1,) angle between the quaternions / pi
-    same_parent: np.ndarray = field(init=False)    # (M-1,) bool: interpolation allowed
-    only_parent: int = field(init=False)           # the parent if it never changes, else -1
-
-    def __post_init__(self) -> None:
-        self.duration = np.diff(self.stamps).astype(np.float64)
-        q0, q1 = self.q[:, :-1], self.q[:, 1:]
-        dot = np.einsum("im,im->m", q0, q1)
-        sign = np.where(dot < 0.0, -1.0, 1.0)
-        self.q_next = q1 * sign
-        self.omega_over_pi = np.arccos(np.clip(dot * sign, -1.0, 1.0)) / np.pi
-        self.same_parent = self.parent[:-1] == self.parent[1:]
-        self.only_parent = int(self.parent[0]) if bool(np.all(self.parent == self.parent[0])) else -1
-
-    @property
-    def first_ns(self) -> int:
-        return int(self.stamps[0])
-
-    @property
-    def last_ns(self) -> int:
-        return int(self.stamps[-1])
-
-    def evaluate(self, stamps: np.ndarray) -> tuple[np.ndarray | int, Rigid, np.ndarray | None]:
-        """The edge at ``stamps`` (N,): (parent ids (N,) or one int, T_parent_child, failure codes (N,) or None)."""
-        if self.static:
-            return int(self.parent[0]), (self.q[:, :1], self.t[:, :1]), None
-        m = self.stamps.size
-        if m == 1:
-            fail = np.where(stamps == self.stamps[0], _OK, _SINGLE).astype(np.int8)
-            return int(self.parent[0]), (self.q[:, :1], self.t[:, :1]), (fail if fail.any() else None)
-        fail = None
-        if stamps.size == 0:
-            return self.only_parent if self.only_parent >= 0 else stamps.copy(), (self.q[:, :0], self.t[:, :0]), None
-        if stamps[0] < self.stamps[0] or stamps[-1] > self.stamps[-1] or not _is_sorted(stamps):
-            codes = np.where(stamps < self.stamps[0], _PAST, np.where(stamps > self.stamps[-1], _FUTURE, _OK))
-            if codes.any():
-                fail = codes.astype(np.int8)
-        # interval j: stamps[j] <= t <= stamps[j+1] (clipped so failing stamps still index safely)
-        j = np.searchsorted(self.stamps, stamps, side="right") - 1
-        np.clip(j, 0, m - 2, out=j)
-        alpha = (stamps - self.stamps[j]).astype(np.float64) / self.duration[j]
-        if fail is not None:
-            np.clip(alpha, 0.0, 1.0, out=alpha)
-        if self.only_parent >= 0:
-            parent: np.ndarray | int = self.only_parent
-        else:
-            # Across a parent change tf2 returns the older sample (or the newer one at its exact stamp).
-            alpha = np.where(self.same_parent[j], alpha, np.floor(alpha))
-            parent = np.where(alpha >= 1.0, self.parent[j + 1], self.parent[j])
-        w0, w1 = _rigid.slerp_weights(alpha, self.omega_over_pi[j])
-        q = self.q[:, j] * w0 + self.q_next[:, j] * w1
-        t = self.t[:, j] * (1.0 - alpha) + self.t[:, j + 1] * alpha
-        return parent, (q, t), fail
-
-
-    def at(self, stamp_ns: int) -> tuple[list[float], list[float]] | None:
-        """T_parent_child (q, t) on plain floats at one stamp, as :meth:`evaluate` gives it for a track whose
-        parent never changes; None where :meth:`evaluate` reports a failure (no data at the stamp)."""
-        m = self.stamps.size
-        if self.static or (m == 1 and stamp_ns == self.stamps[0]):
-            return self.q[:, 0].tolist(), self.t[:, 0].tolist()
-        if m == 1 or stamp_ns < self.stamps[0] or stamp_ns > self.stamps[-1]:
-            return None
-        j = min(max(int(np.searchsorted(self.stamps, stamp_ns, side="right")) - 1, 0), m - 2)
-        alpha = float(stamp_ns - int(self.stamps[j])) / float(self.duration[j])
-        w0, w1 = _rigid.slerp_weights_one(alpha, float(self.omega_over_pi[j]))
-        q0, q1 = self.q[:, j].tolist(), self.q_next[:, j].tolist()
-        t0, t1 = self.t[:, j].tolist(), self.t[:, j + 1].tolist()
-        return [a * w0 + b * w1 for a, b in zip(q0, q1)], [a * (1.0 - alpha) + b * alpha for a, b in zip(t0, t1)]
-
-
-def _is_sorted(stamps: np.ndarray) -> bool:
-    return bool(stamps.size < 2 or np.all(stamps[1:] >= stamps[:-1]))
-
-
-@dataclass
-class _Frame:
-    """A frame id and (if it is ever a child) its samples: pending chunks and their compiled track."""
-
-    name: str
-    static: bool | None = None      # None: only ever seen as a parent (no data of its own)
-    chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = field(default_factory=list)
-    track: _Track | None = None
-    inserted: int = 0               # running insertion counter (ties on stamps keep the last set)
-
-    def compile(self) -> _Track | None:
-        """Merge pending chunks into the sorted track and return it."""
-        if not self.chunks:
-            return self.track
-        parts = self.chunks
-        if self.track is not None:
-            old = self.track
-            parts = [(old.stamps, old.parent, old.q, old.t, -1)] + parts
-        stamps = np.concatenate([p[0] for p in parts])
-        parent = np.concatenate([p[1] for p in parts])
-        q = np.concatenate([p[2] for p in parts], axis=1)
-        t = np.concatenate([p[3] for p in parts], axis=1)
-        order_key = np.concatenate([np.full(p[0].size, p[4], dtype=np.int64) for p in parts])
-        sequence = np.concatenate([np.arange(p[0].size) for p in parts])
-        self.chunks = []
-        if self.static:
-            last = int(np.lexsort((sequence, order_key))[-1])  # a static frame holds the transform set last
-            keep = np.array([last])
-        else:
-            order = np.lexsort((sequence, order_key, stamps))
-            sorted_stamps = stamps[order]
-            last_of_run = np.ones(order.size, dtype=bool)
-            last_of_run[:-1] = sorted_stamps[1:] != sorted_stamps[:-1]
-            keep = order[last_of_run]
-        self.track = _Track(stamps[keep], parent[keep], np.ascontiguousarray(q[:, keep]),
-                            np.ascontiguousarray(t[:, keep]), bool(self.static))
-        return self.track
-
-
-@dataclass
-class _Path:
-    """Stamps (indices into the batch) that walk up through the same frames from one start frame."""
-
-    index: np.ndarray            # (K,) sorted indices into the batch
-    frames: list[int]            # frames[0] = start, frames[k+1] = parent of frames[k]
-    acc: list[Rigid]             # acc[k] = T_{frames[k]}_{start} for these stamps
-    fail_frame: int = -1         # the frame whose own transform failed (the path ends there), or -1 (root)
-    fail_codes: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class _Failure:
-    """Why stamp ``position`` of a batch has no transform: enough to build tf2's message."""
-
-    kind: str                    # "extrapolation" or "connectivity"
-    stamp_ns: int
-    frame: int = -1
-    code: int = _OK
-
-
-class TfBuffer:
+class TfBuffer(LookupWalk):
     """A tf2-style transform buffer over recorded transforms, with vectorized lookups.
 
     Example::
@@ -227,12 +69,12 @@ class TfBuffer:
 
     def __init__(self) -> None:
         self._ids: dict[str, int] = {}
-        self._frames: list[_Frame] = []
+        self._frames: list[FrameSamples] = []
         self.path: str | None = None       # the bag the buffer came from, for error messages
         self.warnings: list[str] = []      # transforms skipped by from_bag / from_arrays(skip_invalid=True)
         self.invalid_dropped: dict[str, int] = {}   # frame -> transforms of it skipped as invalid (NaN, far off, zero quaternion)
         self.bag_span_ns: tuple[int, int] | None = None   # (start_ns, end_ns) of the bag, set by from_bag
-        self._chains: dict[tuple[int, int], tuple[list[_Track], list[_Track]] | None] = {}  # one-stamp fast path
+        self._chains: dict[tuple[int, int], tuple[list[Track], list[Track]] | None] = {}  # one-stamp fast path
 
     # ------------------------------------------------------------------ loading
 
@@ -299,7 +141,7 @@ class TfBuffer:
         self._set(parent, child, stamp_ns, translation, rotation_xyzw, static, skip_invalid=False)
 
     def _set(self, parent, child, stamp_ns, translation, rotation_xyzw, static: bool, skip_invalid: bool) -> None:
-        stamps = _as_stamps(stamp_ns, "stamp_ns")
+        stamps = as_stamps(stamp_ns, "stamp_ns")
         n = stamps.size
         trans = np.asarray(translation, dtype=np.float64).reshape(-1, 3) if np.size(translation) else np.empty((0, 3))
         rot = np.asarray(rotation_xyzw, dtype=np.float64).reshape(-1, 4) if np.size(rotation_xyzw) else np.empty((0, 4))
@@ -308,8 +150,8 @@ class TfBuffer:
             raise InvalidArgumentException(
                 f"set_transform needs N stamps, (N,3) translations and (N,4) rotations; got {np.shape(stamp_ns)}, "
                 f"{np.shape(translation)} and {np.shape(rotation_xyzw)}", self.path)
-        parents = _strip_ids(parent, n)
-        children = _strip_ids(child, n)
+        parents = strip_ids(parent, n)
+        children = strip_ids(child, n)
         bad = np.zeros(n, dtype=bool)
         reasons: list[tuple[np.ndarray, str]] = [
             (parents == "", "frame_id (parent) is empty"),
@@ -363,7 +205,7 @@ class TfBuffer:
         frame_id = self._ids.get(name)
         if frame_id is None:
             frame_id = self._ids[name] = len(self._frames)
-            self._frames.append(_Frame(name))
+            self._frames.append(FrameSamples(name))
         return frame_id
 
     # ------------------------------------------------------------------ queries about frames
@@ -400,9 +242,6 @@ class TfBuffer:
             return None
         return track.first_ns, track.last_ns
 
-    def _track(self, frame_id: int) -> _Track | None:
-        return self._frames[frame_id].compile()
-
     # ------------------------------------------------------------------ validation
 
     def _check_id(self, frame: str, argument: str) -> int:
@@ -434,39 +273,6 @@ class TfBuffer:
             return "The buffer has no frames."
         shown = ", ".join(names[:30]) + (f" and {len(names) - 30} more" if len(names) > 30 else "")
         return f"Known frames: {shown}."
-
-    # ------------------------------------------------------------------ latest common time
-
-    def _latest_chain(self, start: int) -> list[tuple[int, int | None]]:
-        """[(frame, latest stamp or None if static), ...] walking up by each frame's latest parent."""
-        chain: list[tuple[int, int | None]] = []
-        frame = start
-        while True:
-            track = self._track(frame)
-            if track is None:
-                return chain
-            chain.append((frame, None if track.static else track.last_ns))
-            frame = int(track.parent[-1])
-            if len(chain) > len(self._frames):
-                raise LookupException("The tf tree is invalid because it contains a loop.", self.path)
-            if frame == start:
-                raise LookupException("The tf tree is invalid because it contains a loop.", self.path)
-
-    def _chain_to_common(self, target_id: int, source_id: int) -> list[tuple[int, int | None]] | None:
-        """The edges (child frame, latest stamp) between the two frames by latest parents; None if unconnected."""
-        source_chain = self._latest_chain(source_id)
-        target_chain = self._latest_chain(target_id)
-        source_frames = [source_id] + [self._frame_parent_latest(f) for f, _ in source_chain]
-        target_frames = [target_id] + [self._frame_parent_latest(f) for f, _ in target_chain]
-        for j, frame in enumerate(target_frames):
-            if frame in source_frames:
-                i = source_frames.index(frame)
-                return source_chain[:i] + target_chain[:j]
-        return None
-
-    def _frame_parent_latest(self, frame_id: int) -> int:
-        track = self._track(frame_id)   # a frame of a chain: it has data
-        return -1 if track is None else int(track.parent[-1])
 
     def latest_common_time(self, target: str, source: str) -> int | None:
         """tf2's latest common time of the path between two frames, int ns; None if the path is all static.
@@ -547,17 +353,17 @@ class TfBuffer:
     def _lookup_one(self, target: str, source: str, stamp_ns: int) -> np.ndarray | None:
         """T_target_source (4,4) at one stamp on plain floats, or None where the batched path must decide (an
         unknown or malformed frame, a parent that changes over time, no data at the stamp: it raises tf2's
-        errors). :meth:`_Track.at` and the scalar twins of :mod:`bagtools.tf._rigid`, without the array machinery."""
+        errors). :meth:`Track.at` and the scalar twins of :mod:`bagtools.tf._rigid`, without the array machinery."""
         chain = self._chain(target, source)
         if chain is None:
             return None
-        a = _compose_up(chain[0], stamp_ns)
-        b = _compose_up(chain[1], stamp_ns)
+        a = compose_up(chain[0], stamp_ns)
+        b = compose_up(chain[1], stamp_ns)
         if a is None or b is None:
             return None
         return _rigid.matrix_one(_rigid.compose_one(_rigid.inverse_one(b), a))
 
-    def _chain(self, target: str, source: str) -> tuple[list[_Track], list[_Track]] | None:
+    def _chain(self, target: str, source: str) -> tuple[list[Track], list[Track]] | None:
         """The tracks from ``source`` and from ``target`` up to their common ancestor, when every one has a
         parent that never changes (cached until the buffer changes); None otherwise."""
         target_id, source_id = self._ids.get(target), self._ids.get(source)
@@ -647,7 +453,7 @@ class TfBuffer:
     def _lookup_rigid(self, target: str, source: str, stamp_ns, api: str):
         if target == source:  # tf2: the identity, whether or not the buffer knows the frame
             self._check_format(target, f"{api} argument target_frame")
-            stamps = np.zeros(1, dtype=np.int64) if stamp_ns is None else _as_stamps(stamp_ns, "stamp_ns")
+            stamps = np.zeros(1, dtype=np.int64) if stamp_ns is None else as_stamps(stamp_ns, "stamp_ns")
             n = stamps.size
             q = np.zeros((4, n))
             q[3] = 1.0
@@ -659,7 +465,7 @@ class TfBuffer:
             latest = None if target_id == source_id else self.latest_common_time(target, source)
             stamps = np.array([0 if latest is None else latest], dtype=np.int64)
         else:
-            stamps = _as_stamps(stamp_ns, "stamp_ns")
+            stamps = as_stamps(stamp_ns, "stamp_ns")
         if stamps.size <= _BLOCK:
             q, t, valid, failure = self._resolve(target_id, source_id, stamps)
         else:  # blocks that stay in cache are ~2x faster than one pass over 10^6 stamps
@@ -673,7 +479,7 @@ class TfBuffer:
                 failure.update({start + k: f for k, f in block_failure.items()})
         return q, t, valid, single, failure, (target_id, source_id)
 
-    def _finish(self, values, valid: np.ndarray, single: bool, failure: dict[int, _Failure], ids, return_mask: bool):
+    def _finish(self, values, valid: np.ndarray, single: bool, failure: dict[int, Failure], ids, return_mask: bool):
         if not return_mask:
             self._raise_first(valid, failure, ids)
         elif not valid.all():
@@ -687,179 +493,8 @@ class TfBuffer:
             valid = valid[0]
         return (values, valid) if return_mask else values
 
-    def _raise_first(self, valid: np.ndarray, failure: dict[int, _Failure], ids) -> None:
+    def _raise_first(self, valid: np.ndarray, failure: dict[int, Failure], ids) -> None:
         if valid.all():
             return
         position = int(np.flatnonzero(~valid)[0])
         raise self._exception(failure[position], *ids)
-
-    def _resolve(self, target_id: int, source_id: int, stamps: np.ndarray):
-        """Compose T_target_source at every stamp: (q (4,N), t (3,N), valid (N,), {position: _Failure})."""
-        n = stamps.size
-        q = np.zeros((4, n))
-        q[3] = 1.0
-        t = np.zeros((3, n))
-        valid = np.zeros(n, dtype=bool)
-        failure: dict[int, _Failure] = {}
-        if n == 0:
-            return q, t, valid, failure
-        if target_id == source_id:
-            valid[:] = True
-            return q, t, valid, failure
-        everything = np.arange(n)
-        source_paths = self._walk(source_id, stamps, everything)
-        target_paths = self._walk(target_id, stamps, everything)
-        for sp in source_paths:
-            for tp in target_paths:
-                if sp.index is tp.index or (sp.index.size == n and tp.index.size == n):
-                    index, s_sel, t_sel = sp.index, None, None
-                else:
-                    index = np.intersect1d(sp.index, tp.index, assume_unique=True)
-                    if index.size == 0:
-                        continue
-                    s_sel = np.searchsorted(sp.index, index)
-                    t_sel = np.searchsorted(tp.index, index)
-                common = next((f for f in tp.frames if f in sp.frames), None)
-                if common is None:
-                    self._record_failure(failure, index, stamps, sp, tp, s_sel, t_sel)
-                    continue
-                a_source = sp.acc[sp.frames.index(common)]
-                a_target = tp.acc[tp.frames.index(common)]
-                if s_sel is not None:
-                    a_source = _rigid.take(a_source, s_sel)
-                    a_target = _rigid.take(a_target, t_sel)
-                result = _rigid.compose(_rigid.inverse(a_target), a_source)
-                if result is not None:
-                    rq, rt = result
-                    if index.size == n:
-                        q, t = np.broadcast_to(rq, (4, n)), np.broadcast_to(rt, (3, n))
-                    else:
-                        q[:, index], t[:, index] = rq, rt
-                valid[index] = True
-        if not (q.flags.writeable and t.flags.writeable):
-            q, t = q.copy(), t.copy()
-        return q, t, valid, failure
-
-    def _record_failure(self, failure: dict[int, _Failure], index: np.ndarray, stamps: np.ndarray,
-                        sp: _Path, tp: _Path, s_sel, t_sel) -> None:
-        # tf2's order: a failing edge on the target side, then on the source side, else not connected.
-        if tp.fail_frame >= 0:
-            frame, codes = tp.fail_frame, tp.fail_codes if t_sel is None else tp.fail_codes[t_sel]
-        elif sp.fail_frame >= 0:
-            frame, codes = sp.fail_frame, sp.fail_codes if s_sel is None else sp.fail_codes[s_sel]
-        else:
-            frame, codes = -1, None
-        first = int(index[0])
-        if frame < 0:
-            failure[first] = _Failure("connectivity", int(stamps[first]))
-        else:
-            failure[first] = _Failure("extrapolation", int(stamps[first]), frame, int(codes[0]))
-        # Only the first failing position of each group is needed (errors report the first failing stamp).
-
-    def _walk(self, start: int, stamps: np.ndarray, index: np.ndarray) -> list[_Path]:
-        """Walk from ``start`` towards the root at every stamp, splitting where parents or failures differ."""
-        paths: list[_Path] = []
-        stack: list[_Path] = [_Path(index, [start], [None])]
-        while stack:
-            path = stack.pop()
-            frame = path.frames[-1]
-            track = self._track(frame)
-            if track is None:
-                paths.append(path)
-                continue
-            sub_stamps = stamps if path.index.size == stamps.size else stamps[path.index]
-            parent, edge, fail = track.evaluate(sub_stamps)
-            acc = path.acc[-1]
-            index = path.index
-            if fail is not None:
-                ok = fail == _OK
-                paths.append(_Path(index[~ok], path.frames, [_rigid.take(a, ~ok) for a in path.acc],
-                                   frame, fail[~ok]))
-                if not ok.any():
-                    continue
-                index, edge, acc = index[ok], _rigid.take(edge, ok), _rigid.take(acc, ok)
-                accs = [_rigid.take(a, ok) for a in path.acc]
-                if not isinstance(parent, int):
-                    parent = parent[ok]
-            else:
-                accs = path.acc
-            groups = [(parent, None)] if isinstance(parent, int) else \
-                [(int(p), parent == p) for p in np.unique(parent)]
-            for parent_id, select in groups:
-                if select is not None and select.all():
-                    select = None
-                sub_index = index if select is None else index[select]
-                sub_edge = edge if select is None else _rigid.take(edge, select)
-                sub_acc = acc if select is None else _rigid.take(acc, select)
-                sub_accs = accs if select is None else [_rigid.take(a, select) for a in accs]
-                if parent_id in path.frames or len(path.frames) > len(self._frames):
-                    raise LookupException("The tf tree is invalid because it contains a loop.", self.path)
-                stack.append(_Path(sub_index, path.frames + [parent_id], sub_accs + [_rigid.compose(sub_edge, sub_acc)]))
-        return paths
-
-    # ------------------------------------------------------------------ errors
-
-    def _connectivity(self, target_id: int, source_id: int) -> ConnectivityException:
-        return ConnectivityException(
-            f"Could not find a connection between '{self._frames[target_id].name}' and "
-            f"'{self._frames[source_id].name}' because they are not part of the same tree."
-            "Tf has two or more unconnected trees."
-            + self.invalid_note(*sorted(self.invalid_dropped)), self.path)
-
-    def _exception(self, failure: _Failure, target_id: int, source_id: int):
-        if failure.kind == "connectivity":
-            return self._connectivity(target_id, source_id)
-        track = self._track(failure.frame)   # a failing edge belongs to a frame with data
-        requested = format_stamp(failure.stamp_ns)
-        if failure.code == _PAST:
-            cls = BackwardExtrapolationException
-            text = (f"Lookup would require extrapolation into the past.  Requested time {requested} "
-                    f"but the earliest data is at time {format_stamp(track.first_ns)}")
-        elif failure.code == _FUTURE:
-            cls = ForwardExtrapolationException
-            text = (f"Lookup would require extrapolation into the future.  Requested time {requested} "
-                    f"but the latest data is at time {format_stamp(track.last_ns)}")
-        else:
-            cls = NoDataForExtrapolationException
-            text = (f"Lookup would require extrapolation at time {requested}, "
-                    f"but only time {format_stamp(track.first_ns)} is in the buffer")
-        return cls(f"{text}, when looking up transform from frame [{self._frames[source_id].name}] "
-                   f"to frame [{self._frames[target_id].name}]", self.path)
-
-
-def _compose_up(tracks: list[_Track], stamp_ns: int) -> tuple | None:
-    """T_top_start (q, t) on plain floats composed up ``tracks`` (start frame first) at one stamp; None where a
-    track has no data there."""
-    acc = ([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0])
-    for track in tracks:
-        edge = track.at(stamp_ns)
-        if edge is None:
-            return None
-        acc = _rigid.compose_one(edge, acc)
-    return acc
-
-
-def _as_stamps(stamp_ns, name: str) -> np.ndarray:
-    """(N,) int64 from an int or an integer array; raises InvalidArgumentException for floats."""
-    arr = np.asarray(stamp_ns)
-    if arr.dtype == object and arr.size:
-        try:
-            arr = arr.astype(np.int64)
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise InvalidArgumentException(f"{name} must be integer nanoseconds, got {arr.dtype}") from exc
-    if arr.size and not np.issubdtype(arr.dtype, np.integer):
-        raise InvalidArgumentException(f"{name} must be integer nanoseconds (int64), got {arr.dtype}")
-    if arr.ndim > 1:
-        raise InvalidArgumentException(f"{name} must be one stamp or a 1-D array, got shape {arr.shape}")
-    return arr.astype(np.int64, copy=False).reshape(-1)
-
-
-def _strip_ids(ids, n: int) -> np.ndarray:
-    """(n,) str array of frame ids with one leading '/' removed (one id is repeated n times)."""
-    if isinstance(ids, str):
-        stripped = ids[1:] if ids.startswith("/") else ids
-        return np.full(n, stripped, dtype=object)
-    arr = np.asarray(ids, dtype=object).reshape(-1)
-    if arr.size != n:
-        raise InvalidArgumentException(f"got {arr.size} frame ids for {n} transforms")
-    return np.array([s[1:] if s.startswith("/") else s for s in arr.astype(str)], dtype=object)

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.tf.buffer import TfBuffer, format_stamp
+from bagtools.tf.buffer import TfBuffer
+from bagtools.tf.track import format_stamp
 from bagtools.tf.exceptions import ExtrapolationException, LookupException
 from bagtools.tf.sampling import sample_stamps
 from bagtools.transforms import quat2eul, xyzw2quat

@@ -19,7 +19,8 @@ import numpy as np
 from bagtools.errors import BagtoolsError
 from bagtools.figures import tidy_layout
 from bagtools.outputs import OutputDir, check_outputs
-from bagtools.tf.buffer import TfBuffer, format_stamp
+from bagtools.tf.buffer import TfBuffer
+from bagtools.tf.track import format_stamp
 from bagtools.tf.exceptions import ExtrapolationException
 from bagtools.tf.sampling import sample_stamps
 

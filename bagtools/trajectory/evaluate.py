@@ -20,7 +20,7 @@ import numpy as np
 
 from bagtools.errors import BagtoolsError
 from bagtools.trajectory import (
-    ErrorStats, Relations, Trajectory, ape_translation, associate, relation_errors, rpe_translation,
+    ErrorStats, Relations, Trajectory, ape_translation, associate, relation_errors, rpe_frames, rpe_translation,
 )
 from bagtools.trajectory.metrics import DEFAULT_MAX_DIFF_NS
 from bagtools.transforms import se2_between, tform2pose
@@ -105,4 +105,24 @@ def trajectory_errors(reference: Trajectory, estimate: Trajectory) -> dict:
             out[f"relative_gap_{gap}"] = gap_errors(reference, estimate, gap)
         except BagtoolsError as err:
             out[f"relative_gap_{gap}"] = {"unavailable": err.problem}
+    return out
+
+
+def odometry_errors(reference: Trajectory, estimate: Trajectory) -> dict:
+    """An odometry's errors against ``reference`` (both in one frame, from one pose): APE, RPE per metre and per
+    scan (translation m, rotation deg, and how many steps are off by more than 0.2 m); one that cannot be computed
+    says why."""
+    def per_scan() -> dict:
+        trans, rot = rpe_frames(reference, estimate, delta=1)
+        return {"translation_m": ErrorStats.of(trans).as_dict(), "rotation_deg": ErrorStats.of(rot).as_dict(),
+                "steps_over_0_2m": int(np.count_nonzero(trans > 0.2))}
+
+    out: dict = {}
+    for name, fn in (("ape_translation_m", lambda: ape_translation(reference, estimate).as_dict()),
+                     ("rpe_translation_m_per_1m", lambda: rpe_translation(reference, estimate, delta_m=1.0).as_dict()),
+                     ("rpe_per_scan", per_scan)):
+        try:
+            out[name] = fn()
+        except BagtoolsError as err:
+            out[name] = {"unavailable": err.problem}
     return out

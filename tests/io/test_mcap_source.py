@@ -12,7 +12,8 @@ from rosbags.highlevel import AnyReader
 
 from bagtools.errors import BagError
 from bagtools.io import open_bag
-from bagtools.io.mcap_source import iter_segments, scan_mcap
+from bagtools.io.mcap_messages import iter_segments
+from bagtools.io.mcap_source import scan_mcap
 from tests.conftest import FIXTURES
 
 SOURCE = FIXTURES / "sim_lap_cloud_20s" / "sim_lap_cloud_20s.mcap"

@@ -17,7 +17,7 @@ from bagtools.gridmap import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
 from bagtools.localize import tracker
-from bagtools.localize.tracker import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
+from bagtools.localize.settings import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from bagtools_simulate.world import World

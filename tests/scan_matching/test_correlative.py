@@ -14,7 +14,7 @@ from bagtools.scan_matching import (
     match_scans_grid_ranges,
     ranges_to_points,
 )
-from bagtools.scan_matching import correlative
+from bagtools.scan_matching import correlative, window_search
 from bench.bench_ndt import edt_raster
 from bench.scan_pairs import ANGLES_RAD, lds01_ranges, relative_pose, scan_pairs, turtlebot3_world
 
@@ -387,7 +387,7 @@ def test_peaks_miss_no_good_place_of_the_window():
                                 "exhaustive")
     na, nx, ny = prep.win.n
     a, ix, iy = (g.reshape(-1) for g in np.meshgrid(np.arange(na), np.arange(nx), np.arange(ny), indexing="ij"))
-    sums = correlative._scores(prep.win, a, ix * prep.win.stride + iy, 0)
+    sums = window_search.node_scores(prep.win, a, ix * prep.win.stride + iy, 0)
     good = sums >= np.ceil(kw["min_ratio"] * sums.max())
     xy = np.stack((initial[0] + (ix[good] - prep.win.steps[1]) * 0.1, initial[1] + (iy[good] - prep.win.steps[2]) * 0.1),
                   axis=1)
