@@ -123,10 +123,7 @@ def _info(bag: str, out_dir: Path, options: None, force: bool) -> JobOutput:
 def _map_cloud_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.cloudmap import CloudMapOptions
 
-    return WriterConfig(CloudMapOptions(topic=p["topic"], frame=p["frame"], stamp=p["stamp"], sample=p["sample"],
-                                        voxel_m=p["voxel"], max_range_m=p["max_range"], seed=p["seed"],
-                                        refine=p["refine"]),
-                        mcap=not p["no_mcap"])
+    return WriterConfig(CloudMapOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
@@ -144,17 +141,12 @@ def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Jo
 
 def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.gridmap import GridMapOptions
-    from bagtools.grid.options import map_cell_size
     from bagtools.trajectory import read_tum
 
     if p["poses"] not in ("tf", "ground-truth"):
         read_tum(p["poses"])  # a missing or bad trajectory file is one error before any work, not one per bag
 
-    side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=False)
-    return WriterConfig(GridMapOptions(topic=p["topic"], frame=p["frame"] or GridMapOptions.default_frame(p["poses"]),
-                                       poses=p["poses"], resolution=1.0 / side, max_range_m=p["max_range"],
-                                       base_frame=p["base_frame"], scan_frame_offset=p["scan_frame_offset"]),
-                        mcap=not p["no_mcap"])
+    return WriterConfig(GridMapOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
@@ -172,13 +164,7 @@ def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutp
 def _ndt_odom_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.ndtodom import NdtOdomOptions
 
-    return WriterConfig(NdtOdomOptions(topic=p["topic"], init=p["init"], search=not p["no_search"],
-                                       use_odometry=not p["no_odometry"], reference=p["reference"],
-                                       cell_size_m=p["cell_size"], cell_model=p["cell_model"],
-                                       min_score=p["min_score"], max_speed_mps=p["max_speed"],
-                                       max_turn_rate_radps=p["max_turn_rate"], wheeled=not p["holonomic"],
-                                       scan_frame_offset=p["scan_frame_offset"]),
-                        mcap=not p["no_mcap"])
+    return WriterConfig(NdtOdomOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
@@ -196,20 +182,13 @@ def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Job
 
 
 def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.grid.options import map_cell_size
     from bagtools.slam import SlamOptions
     from bagtools.trajectory import read_relations
 
     if p["relations"]:
         read_relations(p["relations"])  # a missing or bad relations file is one error before any work
 
-    side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=True)
-    return WriterConfig(SlamOptions(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=side,
-                                    max_range_m=p["max_range"], loop_search_radius_m=p["loop_search_radius"],
-                                    loop_closure=not p["no_loop_closure"], loop_min_score=p["loop_min_score"],
-                                    keep_scans=not p["no_mcap"], relations=p["relations"],
-                                    scan_frame_offset=p["scan_frame_offset"]),
-                        mcap=not p["no_mcap"])
+    return WriterConfig(SlamOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
@@ -229,9 +208,7 @@ def _localize_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.localize import LocalizeOptions
 
     read_nav2_map(p["map_yaml"])  # a missing or bad map is one error before any work
-    return WriterConfig((str(p["map_yaml"]), LocalizeOptions(
-        topic=p["topic"], initial_pose=p["initial_pose"], use_odometry=not p["no_odometry"],
-        scan_frame_offset=p["scan_frame_offset"], smooth=not p["no_smoothing"])), mcap=not p["no_mcap"])
+    return WriterConfig((str(p["map_yaml"]), LocalizeOptions.from_params(p)), mcap=not p["no_mcap"])
 
 
 def _localize(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:

@@ -60,9 +60,7 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, cell
 
     check_outputs(out_dir, run_outputs(GRID_MAP_FILES, not no_mcap), force, inputs=[bag, *([poses] if poses not in ('tf', 'ground-truth') else [])])  # fail before the work, not after it
 
-    options = GridMapOptions(topic=topic, frame=GridMapOptions.default_frame(poses) if frame is None else frame, poses=poses,
-                             resolution=1.0 / side, max_range_m=max_range, base_frame=base_frame,
-                             scan_frame_offset=scan_frame_offset)
+    options = GridMapOptions.from_params(click.get_current_context().params)
     result = GridMapPipeline(bag, options, keep_scans=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

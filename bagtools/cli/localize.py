@@ -63,8 +63,7 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
     from bagtools.results import run_outputs
 
     check_outputs(out_dir, run_outputs(LOCALIZE_FILES, not no_mcap), force, inputs=[bag, map_yaml])  # fail before the work, not after it
-    options = LocalizeOptions(topic=topic, initial_pose=initial_pose, use_odometry=not no_odometry,
-                              scan_frame_offset=scan_frame_offset, smooth=not no_smoothing)
+    options = LocalizeOptions.from_params(click.get_current_context().params)
     result = LocalizePipeline(bag, map_yaml, options, keep_scans=not no_mcap).run()
     s = result.summary
     for warning in s.get("warnings", []):

@@ -53,8 +53,7 @@ def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample
 
     check_outputs(out_dir, cloud_map_outputs(not no_mcap, refine), force, inputs=[bag])  # fail before the work
 
-    options = CloudMapOptions(topic=topic, frame=frame, stamp=stamp, sample=sample, voxel_m=voxel,
-                              max_range_m=max_range, seed=seed, refine=refine)
+    options = CloudMapOptions.from_params(click.get_current_context().params)
     result = CloudMapPipeline(bag, options, keep_inputs=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

@@ -71,10 +71,7 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
 
     check_outputs(out_dir, run_outputs(NDT_ODOM_FILES, not no_mcap), force, inputs=[bag])  # fail before the work, not after it
 
-    options = NdtOdomOptions(topic=topic, init=init, search=not no_search, use_odometry=not no_odometry,
-                             reference=reference, cell_size_m=cell_size, cell_model=cell_model, min_score=min_score,
-                             max_speed_mps=max_speed, max_turn_rate_radps=max_turn_rate, wheeled=not holonomic,
-                             scan_frame_offset=scan_frame_offset)
+    options = NdtOdomOptions.from_params(click.get_current_context().params)
     result = NdtOdomPipeline(bag, options, keep_scans=not no_mcap).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

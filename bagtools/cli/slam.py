@@ -66,10 +66,7 @@ def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_
 
     check_outputs(out_dir, run_outputs(SLAM_FILES, not no_mcap), force, inputs=[bag, *([relations] if relations else [])])  # fail before the work, not after it
 
-    options = SlamOptions(topic=topic, use_odometry=not no_odometry, resolution_m=side, max_range_m=max_range,
-                          loop_search_radius_m=loop_search_radius, loop_closure=not no_loop_closure,
-                          loop_min_score=loop_min_score, keep_scans=not no_mcap, relations=relations,
-                          scan_frame_offset=scan_frame_offset)
+    options = SlamOptions.from_params(click.get_current_context().params)
     result = SlamPipeline(bag, options).run()
     for warning in result.summary.get("warnings", []):
         click.echo(f"bagtools: warning: {warning}", err=True)

@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -68,6 +69,13 @@ class CloudMapOptions:
     max_range_m: float | None = None
     seed: int = 0
     refine: bool = False
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any]) -> CloudMapOptions:
+        """The options ``bagtools map-cloud`` was given: its click parameters by name (the command and its batch
+        job build them here, so the two cannot differ)."""
+        return cls(topic=p["topic"], frame=p["frame"], stamp=p["stamp"], sample=p["sample"], voxel_m=p["voxel"],
+                   max_range_m=p["max_range"], seed=p["seed"], refine=p["refine"])
 
     def __post_init__(self) -> None:
         if self.sample is not None and not 0.0 < self.sample <= 1.0:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from bagtools.errors import BagtoolsError
 
@@ -96,6 +98,15 @@ class GridMapOptions:
             raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
         if self.max_cells <= 0:
             raise BagtoolsError(f"max_cells must be positive, got {self.max_cells}")
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any]) -> GridMapOptions:
+        """The options ``bagtools grid`` was given: its click parameters by name (the command and its batch job
+        build them here, so the two cannot differ)."""
+        side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=False)
+        return cls(topic=p["topic"], frame=cls.default_frame(p["poses"]) if p["frame"] is None else p["frame"],
+                   poses=p["poses"], resolution=1.0 / side, max_range_m=p["max_range"], base_frame=p["base_frame"],
+                   scan_frame_offset=p["scan_frame_offset"])
 
     @staticmethod
     def default_frame(poses: str) -> str:

@@ -19,8 +19,11 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +63,13 @@ class LocalizeOptions:
     use_odometry: bool = True
     scan_frame_offset: tuple[float, float, float] | None = None
     smooth: bool = True
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any]) -> LocalizeOptions:
+        """The options ``bagtools localize`` was given: its click parameters by name (the command and its batch job
+        build them here, so the two cannot differ)."""
+        return cls(topic=p["topic"], initial_pose=p["initial_pose"], use_odometry=not p["no_odometry"],
+                   scan_frame_offset=p["scan_frame_offset"], smooth=not p["no_smoothing"])
 
     def __post_init__(self) -> None:
         for name, value in (("--initial-pose", self.initial_pose), ("--scan-frame-offset", self.scan_frame_offset)):

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -131,6 +133,15 @@ class NdtOdomOptions:
                 raise BagtoolsError(f"{flag} must be a positive number no robot exceeds (at most {most:g}), got {value}")
         if self.max_iterations < 1:
             raise BagtoolsError(f"max_iterations must be at least 1, got {self.max_iterations}")
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any]) -> NdtOdomOptions:
+        """The options ``bagtools ndt-odom`` was given: its click parameters by name (the command and its batch job
+        build them here, so the two cannot differ)."""
+        return cls(topic=p["topic"], init=p["init"], search=not p["no_search"], use_odometry=not p["no_odometry"],
+                   reference=p["reference"], cell_size_m=p["cell_size"], cell_model=p["cell_model"],
+                   min_score=p["min_score"], max_speed_mps=p["max_speed"], max_turn_rate_radps=p["max_turn_rate"],
+                   wheeled=not p["holonomic"], scan_frame_offset=p["scan_frame_offset"])
 
     def front_end(self, cell_size_m: float) -> FrontEndOptions:
         """The settings of the :class:`~bagtools.odometry.frontend.LaserOdometry` these options ask for

@@ -35,16 +35,17 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from bagtools.dataset import ScanClock, require_topic
 from bagtools.errors import BagtoolsError
 from bagtools.grid import OccupancyGrid
-from bagtools.grid.options import MAX_RESOLUTION, MIN_RESOLUTION, GridMapOptions
+from bagtools.grid.options import MAX_RESOLUTION, MIN_RESOLUTION, GridMapOptions, map_cell_size
 from bagtools.grid.pipeline import GridMapPipeline
 from bagtools.io import LASERSCAN_TYPES, open_bag
 from bagtools.odometry.options import NdtOdomOptions
@@ -118,6 +119,16 @@ class SlamOptions:
         if self.scan_frame_offset is not None and (len(self.scan_frame_offset) != 3
                                                    or not all(math.isfinite(v) for v in self.scan_frame_offset)):
             raise BagtoolsError(f"--scan-frame-offset must be three numbers X,Y,YAW, got {self.scan_frame_offset!r}")
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any]) -> SlamOptions:
+        """The options ``bagtools slam`` was given: its click parameters by name (the command and its batch job
+        build them here, so the two cannot differ)."""
+        side, _ = map_cell_size(p["cell_size"], p["cells_per_metre"], p["resolution"], resolution_in_metres=True)
+        return cls(topic=p["topic"], use_odometry=not p["no_odometry"], resolution_m=side, max_range_m=p["max_range"],
+                   loop_search_radius_m=p["loop_search_radius"], loop_closure=not p["no_loop_closure"],
+                   loop_min_score=p["loop_min_score"], keep_scans=not p["no_mcap"], relations=p["relations"],
+                   scan_frame_offset=p["scan_frame_offset"])
 
     def back_end_options(self) -> BackEndOptions:
         """The back end's settings: the loop search with this run's radius, score and range."""

@@ -97,6 +97,36 @@ def test_a_job_uses_every_option_of_its_command(command: str, tmp_path: Path) ->
     assert not params.read & JOBS[command].ignored
 
 
+class _Built(Exception):
+    """Raised by a stand-in pipeline with the options the command built."""
+
+
+@pytest.mark.parametrize("command, pipeline, args", [
+    ("slam", "bagtools.slam.SlamPipeline", ["--no-odometry", "--loop-min-score", "0.6", "--cell-size", "0.1"]),
+    ("ndt-odom", "bagtools.ndtodom.NdtOdomPipeline", ["--reference", "previous", "--max-speed", "0.7", "--holonomic"]),
+    ("grid", "bagtools.gridmap.GridMapPipeline", ["--resolution", "10", "--max-range", "8"]),
+    ("map-cloud", "bagtools.cloudmap.CloudMapPipeline", ["--voxel", "0.05", "--seed", "3"]),
+    ("localize", "bagtools.localize.LocalizePipeline", ["--no-smoothing", "--initial-pose", "1,2,0.5"]),
+])
+def test_the_command_and_its_job_build_the_same_options(command: str, pipeline: str, args: list[str], tmp_path: Path,
+                                                         monkeypatch) -> None:
+    """One description of each command: what ``bagtools COMMAND`` runs with equals what its batch job runs with,
+    defaults and given options alike."""
+    module, name = pipeline.rsplit(".", 1)
+    built = []
+
+    def stand_in(bag, *rest, **kwargs):
+        built.append(next(a for a in (*rest, *kwargs.values()) if hasattr(a, "__dataclass_fields__")))
+        raise _Built
+
+    monkeypatch.setattr(f"{module}.{name}", stand_in)
+    required = _required_args(command, tmp_path)
+    with pytest.raises(_Built):
+        cli.main([command, str(SIM_BAG), "--out", str(tmp_path / "out"), *required, *args], standalone_mode=False)
+    job = JOBS[command].options(_params(command, [*required, *args])).options
+    assert built == [job[1] if command == "localize" else job]
+
+
 @pytest.mark.parametrize("command, args", [
     ("grid", ["--resolution", "10"]),
     ("ndt-odom", ["--reference", "previous"]),
