@@ -14,17 +14,17 @@ What each line becomes (messages in the ROS 1 types, so that ``header.seq`` says
 - Stamps are each line's ``ipc_timestamp``, exact to the nanosecond (parsed as decimal text, never a float):
   the benchmarks' ``.relations`` files use them.
 
-Beam angles. ``ROBOTLASER``/``RAWLASER`` lines carry start angle, field of view and angular resolution, and are
-used as they say. ``FLASER``/``RLASER`` lines carry only the beam count: the beams span the field of view end to
-end, from -fov/2 to +fov/2, fov/(n-1) apart, the field of view being 180 degrees (100 for the 400 and 401 beams of
-a SICK in its 100-degree mode). CARMEN's own ``carmen_laser_get_angle_increment`` differs for 180 and 360 beams:
-1 and 0.5 degree from -90 (its ``carmen_laser_get_fov`` says "last beam ignored"), ending at +89 and +89.5. The
-benchmarks' relations decide against that for 180 beams: the Intel log (180 beams) read with CARMEN's spacing
-scores 0.249 m with odometry (Kümmerle's metric, every relation), with -89..+90 at 1 degree 0.033 m, centred
-(-89.5..+89.5) 0.178 m, and spread end to end 0.018 m, as the bag converted by the benchmark's maintainers.
-ACES (180 beams, 0.036 and 0.038 m) and Freiburg 079 (360 beams, 0.031 and 0.032 m) are indifferent. The maximum range of these lines is
-the laser's no-return reading found in the log (:meth:`CarmenSource._max_range_of`), else ``PARAM
-robot_front_laser_max`` (or ``robot_rear_laser_max``) when the log has it, else :data:`FLASER_MAX_RANGE_M`.
+Beam angles. ``ROBOTLASER``/``RAWLASER`` lines carry start angle, field of view and angular resolution, used as
+they say. ``FLASER``/``RLASER`` lines carry only the beam count: the beams span the field of view (180 degrees, 100
+for the 400 and 401 beams of a SICK's 100-degree mode) end to end, fov/(n-1) apart. CARMEN's own layout is 1 and
+0.5 degree from -90 for 180 and 360 beams ("last beam ignored"); the Intel log's relations (180 beams) decide
+against it: 0.249 m with odometry (Kümmerle's metric) that way, 0.033 m at 1 degree from -89, 0.178 m centred,
+0.018 m end to end, as the benchmark's bag. ACES (180 beams) and Freiburg 079 (360) are indifferent. A log that
+declares its laser's resolution (``PARAM laser_frontlaser_resolution``/``laser_rearlaser_resolution``, degrees) is
+read as CARMEN lays it out, from -fov/2, when the beams fit: FHW's (180 beams, 1 degree) scores 0.149 / 0.126 m
+aligned APE that way, 0.174 / 0.198 m end to end. The maximum range of these lines is the laser's no-return
+reading found in the log (:meth:`CarmenSource._max_range_of`), else ``PARAM robot_front_laser_max`` (rear), else
+:data:`FLASER_MAX_RANGE_M`.
 """
 
 from __future__ import annotations
@@ -131,10 +131,13 @@ class _Laser:
     laser_in_base: tuple[float, float, float] | None  # the laser's pose on the robot, where the line says
 
 
-def carmen_beam_geometry(n: int) -> tuple[float, float]:
+def carmen_beam_geometry(n: int, declared_increment: float | None = None) -> tuple[float, float]:
     """(start, increment) in radians of a FLASER/RLASER line of ``n`` beams: its field of view (180 degrees, 100
-    for 400 or 401 beams) spanned end to end (module docstring: the relations' verdict)."""
+    for 400 or 401 beams) spanned end to end (module docstring), unless the log declares the laser's resolution
+    (``declared_increment``, radians): then that far apart from the field of view's start, if they fit in it."""
     fov = math.radians(100.0) if n in (400, 401) else math.pi
+    if declared_increment is not None and 0 < declared_increment and (n - 1) * declared_increment <= fov + 1e-9:
+        return -fov / 2.0, declared_increment
     return -fov / 2.0, fov / max(n - 1, 1)
 
 
@@ -191,13 +194,15 @@ def _stamp_index(kind: str, words: list[bytes]) -> int:
     return k if kind.startswith("RAWLASER") else k + 11
 
 
-def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float]) -> _Laser:
+def _parse_laser(kind: str, words: list[bytes], max_ranges: dict[str, float],
+                 increments: dict[str, float] | None = None) -> _Laser:
     """One laser line (``words`` without the keyword); ``max_ranges``: the maximum range of FLASER/RLASER lines,
-    which do not say it (:meth:`CarmenSource._max_range_of`)."""
+    which do not say it (:meth:`CarmenSource._max_range_of`); ``increments``: their angular resolution (radians)
+    where the log declares it."""
     if kind in ("FLASER", "RLASER"):
         n = int(words[0])
         ranges = _ranges(words[1:1 + n])
-        start, increment = carmen_beam_geometry(n)
+        start, increment = carmen_beam_geometry(n, (increments or {}).get(kind))
         max_range = max_ranges.get(kind, FLASER_MAX_RANGE_M)
         return _Laser(_stamp(words[7 + n]), start, increment, max_range, ranges, None)
     # RAWLASERk / ROBOTLASERk: laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
@@ -288,6 +293,8 @@ class CarmenSource:
         kinds = Counter(kind for _, kind, _ in lines)
         self._max_range = {kind: self._max_range_of(kind, [i for i, k, _ in lines if k == kind])
                            for kind in ("FLASER", "RLASER") if kinds[kind]}
+        self._increment = {kind: math.radians(self.params[name]) for kind, name in (
+            ("FLASER", "laser_frontlaser_resolution"), ("RLASER", "laser_rearlaser_resolution")) if name in self.params}
         chosen = {topic: next((k for k in pref if kinds[k]), None) for topic, (pref, _) in _LASERS.items()}
         self._kind_of_topic = {t: k for t, k in chosen.items() if k is not None}
         used = set(self._kind_of_topic.values()) | {"ODOM"}
@@ -383,7 +390,7 @@ class CarmenSource:
         words = line.split()
         kind, text = words[0].decode("ascii", "replace"), words[1:]
         if rec.topic not in ("/odom", "/tf"):
-            return self._scan(_parse_laser(kind, text, self._max_range), rec.topic, seq)
+            return self._scan(_parse_laser(kind, text, self._max_range, self._increment), rec.topic, seq)
         stamp, pose = _parse_odom(text) if kind == "ODOM" else _laser_odometry(kind, text)
         if rec.topic == "/odom":
             return self._odometry(stamp, pose, seq)

@@ -301,3 +301,22 @@ def test_a_truncated_gzip_log_is_read_up_to_the_cut(tmp_path: Path) -> None:
         assert 100 < n < 400 and any("truncated gzip stream" in w for w in bag.warnings), bag.warnings
     done = _run("info", str(log))
     assert done.returncode == 0 and "truncated gzip stream" in done.stderr, done.stderr
+
+
+def test_a_declared_angular_resolution_lays_out_the_beams() -> None:
+    """A log that says its laser's resolution (``PARAM laser_frontlaser_resolution 1``: 1 degree) is read with it,
+    from -90 degrees as CARMEN does (the FHW log's 180 beams); one the beams could not fit is ignored."""
+    assert carmen_beam_geometry(180, math.radians(1.0)) == pytest.approx((-math.pi / 2, math.radians(1.0)))
+    assert carmen_beam_geometry(361, math.radians(0.5)) == pytest.approx((-math.pi / 2, math.radians(0.5)))
+    assert carmen_beam_geometry(361, math.radians(1.0)) == pytest.approx((-math.pi / 2, math.pi / 360))
+
+
+def test_a_log_declaring_its_resolution_is_read_with_it(tmp_path: Path) -> None:
+    line = flaser([2.0] * 180, (0.0, 0.0, 0.0), "3.25")
+    with open_bag(write(tmp_path / "declared.clf", ["PARAM laser_frontlaser_resolution 1 0.0 nohost 0", line])) as bag:
+        scan = decode_laserscan(next(r.msg for r in bag.messages(["/scan"])))
+    assert scan.angle_increment_rad == pytest.approx(math.radians(1.0))
+    assert scan.angles_rad[0] == pytest.approx(-math.pi / 2) and scan.angles_rad[-1] == pytest.approx(math.radians(89))
+    with open_bag(write(tmp_path / "plain.clf", [line])) as bag:
+        scan = decode_laserscan(next(r.msg for r in bag.messages(["/scan"])))
+    assert scan.angles_rad[-1] == pytest.approx(math.pi / 2)
