@@ -134,9 +134,10 @@ class _Laser:
 def carmen_beam_geometry(n: int, declared_increment: float | None = None) -> tuple[float, float]:
     """(start, increment) in radians of a FLASER/RLASER line of ``n`` beams: its field of view (180 degrees, 100
     for 400 or 401 beams) spanned end to end (module docstring), unless the log declares the laser's resolution
-    (``declared_increment``, radians): then that far apart from the field of view's start, if they fit in it."""
+    (``declared_increment``, radians): then that far apart from its start, if they span it to within two beams."""
     fov = math.radians(100.0) if n in (400, 401) else math.pi
-    if declared_increment is not None and 0 < declared_increment and (n - 1) * declared_increment <= fov + 1e-9:
+    if declared_increment is not None and 0 < declared_increment and \
+            fov - 2 * declared_increment - 1e-9 <= (n - 1) * declared_increment <= fov + 1e-9:
         return -fov / 2.0, declared_increment
     return -fov / 2.0, fov / max(n - 1, 1)
 

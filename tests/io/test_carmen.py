@@ -305,10 +305,12 @@ def test_a_truncated_gzip_log_is_read_up_to_the_cut(tmp_path: Path) -> None:
 
 def test_a_declared_angular_resolution_lays_out_the_beams() -> None:
     """A log that says its laser's resolution (``PARAM laser_frontlaser_resolution 1``: 1 degree) is read with it,
-    from -90 degrees as CARMEN does (the FHW log's 180 beams); one the beams could not fit is ignored."""
+    from -90 degrees as CARMEN does (the FHW log's 180 beams); one by which the beams would not span the field of
+    view (to within two beams) is ignored: it would squeeze or overflow the scan."""
     assert carmen_beam_geometry(180, math.radians(1.0)) == pytest.approx((-math.pi / 2, math.radians(1.0)))
     assert carmen_beam_geometry(361, math.radians(0.5)) == pytest.approx((-math.pi / 2, math.radians(0.5)))
     assert carmen_beam_geometry(361, math.radians(1.0)) == pytest.approx((-math.pi / 2, math.pi / 360))
+    assert carmen_beam_geometry(180, math.radians(0.5)) == pytest.approx((-math.pi / 2, math.pi / 179))
 
 
 def test_a_log_declaring_its_resolution_is_read_with_it(tmp_path: Path) -> None:
