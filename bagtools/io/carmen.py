@@ -339,9 +339,8 @@ class CarmenSource:
         of the first NO_RETURN_SAMPLE lines are that reading when they come in at least NO_RETURN_MIN_LINES lines
         and no other span as wide above half of it holds more (real far returns spread over metres; a saturated
         one repeats, scan after scan), and lie beyond twice the median reading; the smallest of them is the
-        maximum range. The readings outrank the PARAM:
-        it is what the robot was set to use (Edmonton's says 10 m, and a third of its readings lie between 10 and
-        51 m), not what the laser can see."""
+        maximum range. The readings outrank the PARAM, which is what the robot was set to use (Edmonton's says
+        10 m, and a third of its readings lie between 10 and 51 m), not what the laser can see."""
         side = "front" if kind == "FLASER" else "rear"
         fallback = self.params.get(f"robot_{side}_laser_max", FLASER_MAX_RANGE_M)
         readings = []
@@ -357,11 +356,11 @@ class CarmenSource:
             return fallback
         low = np.float32(top - NO_RETURN_SPREAD_M)
         lines_at_top = sum(bool((r > low).any()) for r in readings)
-        far = np.sort(np.concatenate(readings))
-        far = far[far > 0.5 * top]
+        values = np.sort(np.concatenate(readings))
+        far = values[values > 0.5 * top]  # holds the largest reading at least
         at_top = len(far) - int(np.searchsorted(far, low, side="right"))
         densest = int((np.searchsorted(far, far + np.float32(NO_RETURN_SPREAD_M), side="right") - np.arange(len(far))).max())
-        beyond_most = low > 2.0 * float(np.median(np.concatenate(readings)))  # a laser's range, not the room's
+        beyond_most = low > 2.0 * float(np.median(values))  # a laser's range, not the room's
         if lines_at_top >= NO_RETURN_MIN_LINES and at_top >= densest and beyond_most:
             return float(far[far > low].min())
         return fallback
