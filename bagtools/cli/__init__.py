@@ -106,6 +106,20 @@ def _raise_terminated(signum: int, frame: object) -> None:
     raise Terminated(signum)
 
 
+def _deliver_again(unraisable: object) -> None:
+    """``sys.unraisablehook`` while a command runs: a :class:`Terminated` raised where Python can only ignore it
+    (the signal arrived during a weakref or import-lock callback) is not lost: the signal is sent again a moment
+    later, from a helper thread, and raised once the main thread is out of the callback. Anything else goes to
+    Python's own hook."""
+    exc = getattr(unraisable, "exc_value", None)
+    if isinstance(exc, Terminated):
+        import threading
+
+        threading.Timer(0.01, os.kill, (os.getpid(), exc.signum)).start()
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: run the CLI and translate errors to one line and exit status 2.
 
@@ -117,11 +131,13 @@ def main(argv: list[str] | None = None) -> None:
     """
     args = list(sys.argv[1:] if argv is None else argv)
     previous = {sig: signal.signal(sig, _raise_terminated) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _deliver_again
     try:
         code = _run(args)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        sys.unraisablehook = previous_hook
     sys.exit(code)
 
 

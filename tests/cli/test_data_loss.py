@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -111,3 +112,30 @@ def test_sigterm_removes_staging_and_sigkill_staging_is_swept_by_the_next_run(tm
     result = subprocess.run(argv[:5] + ["--duration", "1", "--no-cloud"], capture_output=True, text=True, env=env)
     assert result.returncode == 0, result.stderr
     assert [p.name for p in tmp_path.iterdir()] == ["sim"]
+
+
+def test_a_sigterm_raised_where_python_ignores_exceptions_is_delivered_again() -> None:
+    """A signal that arrives while Python runs a weakref or import-lock callback raises there, and Python can only
+    print and ignore the exception (CI saw a SIGTERM lost that way, mid-import: exit 0, the run completed). The
+    command's unraisable hook sends it again, and it ends the command."""
+    script = textwrap.dedent("""
+        import gc, signal, sys, time, weakref
+        from bagtools.cli import Terminated, _deliver_again, _raise_terminated
+        signal.signal(signal.SIGTERM, _raise_terminated)
+        sys.unraisablehook = _deliver_again
+        class Held: pass
+        held = Held()
+        probe = weakref.ref(held, lambda ref: signal.raise_signal(signal.SIGTERM))
+        try:
+            del held
+            gc.collect()
+            for _ in range(500):
+                time.sleep(0.002)
+            print("lost")
+        except Terminated as exc:
+            print("delivered", exc.signum)
+    """)
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=60)
+    assert done.stdout.strip() == f"delivered {int(signal.SIGTERM)}", (done.stdout, done.stderr)
+    assert "Exception ignored" not in done.stderr
