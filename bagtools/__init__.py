@@ -14,13 +14,13 @@ tests/test_architecture.py):
 - ``odometry``: the laser-odometry front end that ``slam``, ``ndt-odom`` and ``localize`` share, and a bag
   through it;
 - ``pose_graph``: loop closure (constraint search) and the GTSAM pose graph;
-- the commands: ``baginfo`` (``info``), ``gridmap`` (``grid``), ``cloudmap`` (``map-cloud``), ``ndtodom``
-  (``ndt-odom``), ``slam`` (and ``eval``), ``localize``, ``export``;
+- ``commands``: one module or package per command, named as the command is (``info``, ``grid``, ``map_cloud``,
+  ``ndt_odom``, ``slam``, ``localize``, ``export``): its own pipeline and its writer;
 - ``results``: results.mcap writers (to open beside the bag in Foxglove);
 - ``batch``: many bags through one command on a Dask cluster;
 - ``cli``: the thin click shell (``bagtools --help``).
 
-Modules: ``baginfo`` (``bagtools info``), ``outputs`` (atomic writes, --force, staging), ``errors``, ``limits``
+Modules: ``outputs`` (atomic writes, --force, staging), ``errors``, ``limits``
 (memory budget), ``progress``, ``figures``, ``simtruth`` (a bag's /ground_truth). The simulator installs as
 ``bagtools_simulate``.
 """

@@ -43,7 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 _SEQUENTIAL = """
 import sys
 from pathlib import Path
-from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+from bagtools.commands.ndt_odom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 out = Path(sys.argv[1])
 for bag in sys.argv[2:]:
     result = NdtOdomPipeline(bag, NdtOdomOptions(), keep_scans=True).run()  # as `bagtools ndt-odom` does

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, write_cloud_map
+from bagtools.commands.map_cloud import CloudMapOptions, CloudMapPipeline, write_cloud_map
 from bagtools.dataset import SensorStream
 from bagtools.io import open_bag
 from bagtools.simtruth import load_sim_world, read_ground_truth

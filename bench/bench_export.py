@@ -6,8 +6,8 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from bagtools.export import export_topic
-from bagtools.export.tables import DECODERS
+from bagtools.commands.export import export_topic
+from bagtools.commands.export.tables import DECODERS
 from bagtools.io import open_bag
 from bench.common import Row, best_time_s
 from bagtools_simulate.pipeline import SimConfig, simulate_bag

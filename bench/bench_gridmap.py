@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bagtools.gridmap import GridMapOptions, GridMapPipeline, write_grid_map
+from bagtools.commands.grid import GridMapOptions, GridMapPipeline, write_grid_map
 from bagtools.io import decode_laserscan, open_bag
 from bench.common import Row, best_time_s
 from bagtools_simulate.pipeline import SimConfig, simulate_bag

@@ -69,8 +69,8 @@ BENCHMARK_DIR = REAL_DIR.parent / "benchmark"
 def _benchmark_rows() -> list[Row]:
     """Each classic benchmark log mapped by ``bagtools slam``, then localized in that map with no initial pose
     (with and without odometry): the relations error of the localization against slam's own (skipped when absent)."""
-    from bagtools.localize import LocalizeOptions, LocalizePipeline
-    from bagtools.slam import SlamOptions, SlamPipeline
+    from bagtools.commands.localize import LocalizeOptions, LocalizePipeline
+    from bagtools.commands.slam import SlamOptions, SlamPipeline
     from bagtools.grid import write_nav2_map
     from bagtools.trajectory import read_relations
     from bagtools.trajectory.relations import relation_errors
@@ -107,8 +107,8 @@ def _benchmark_rows() -> list[Row]:
 def _reverse_rows(log: str, bag: Path, reference, slam_trajectory, tmp: Path) -> list[Row]:
     """The log's first half mapped by slam, its second half localized in that map (see the module docstring)."""
     from bagtools.grid import write_nav2_map
-    from bagtools.localize import LocalizeOptions, LocalizePipeline
-    from bagtools.slam import SlamOptions, SlamPipeline
+    from bagtools.commands.localize import LocalizeOptions, LocalizePipeline
+    from bagtools.commands.slam import SlamOptions, SlamPipeline
     from bagtools.trajectory.relations import relation_errors
 
     first, second = bag_halves(bag, tmp)
@@ -164,10 +164,10 @@ def scan_sequence(bag: Path):
 
 def _simulated_rows(quick: bool) -> list[Row]:
     from bagtools.grid import read_nav2_map, write_nav2_map
-    from bagtools.gridmap import GridMapOptions, GridMapPipeline
-    from bagtools.localize import LocalizePipeline, MapLocalizer
-    from bagtools.ndtodom import run_front_end
-    from bagtools.slam import SlamOptions, SlamPipeline
+    from bagtools.commands.grid import GridMapOptions, GridMapPipeline
+    from bagtools.commands.localize import LocalizePipeline, MapLocalizer
+    from bagtools.commands.ndt_odom import run_front_end
+    from bagtools.commands.slam import SlamOptions, SlamPipeline
     from bagtools.transforms import se2_between, se2_compose
     from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
@@ -226,8 +226,8 @@ def _start_rows(name: str, nav2, inputs, odom: np.ndarray, truth: np.ndarray, tw
     """From ``n_starts`` random scans of the figure eight, no initial pose, in the map ``nav2`` (``truth`` and
     its 180-degree ``twin`` (N, 3) in the map's frame): fixed within 2 s at the place (5 cm), still alike at 2 s
     with the place among the hypotheses, fixed wrong; and the starts the twin explains as well."""
-    from bagtools.localize import MapLocalizer
-    from bagtools.localize.settings import CONFIRM_MARGIN, TRACKING
+    from bagtools.commands.localize import MapLocalizer
+    from bagtools.commands.localize.settings import CONFIRM_MARGIN, TRACKING
 
     points = nav2.occupied_points()
     starts = np.random.default_rng(11).choice(len(odom) - 20, size=n_starts, replace=False)
@@ -284,7 +284,7 @@ def _twin_alike(localizer, inputs, truth: np.ndarray, twin: np.ndarray, start: i
     only the 'head' hexagon breaks; both (N, 3) in the map's frame) explain the scans from ``start`` to
     ``deadline`` as well as the true pose: mean evidence (score x share of beams not through walls, on the map)
     within the confirmation margin?"""
-    from bagtools.localize.settings import CONFIRM_MARGIN
+    from bagtools.commands.localize.settings import CONFIRM_MARGIN
 
     ours, theirs = [], []
     for k in range(start, len(truth)):
@@ -298,12 +298,12 @@ def _twin_alike(localizer, inputs, truth: np.ndarray, twin: np.ndarray, start: i
 
 def _global_rows(quick: bool) -> list[Row]:
     from bagtools.grid import read_nav2_map, write_nav2_map
-    from bagtools.gridmap import GridMapOptions, GridMapPipeline
+    from bagtools.commands.grid import GridMapOptions, GridMapPipeline
     from bagtools.io import open_bag
-    from bagtools.localize import GlobalLocalizer
-    from bagtools.localize.global_search import REACH_M
+    from bagtools.commands.localize import GlobalLocalizer
+    from bagtools.commands.localize.global_search import REACH_M
     from bagtools.scan_matching import match_scans_grid, voxel_subsample
-    from bagtools.ndtodom import run_front_end
+    from bagtools.commands.ndt_odom import run_front_end
     from bagtools.simtruth import read_ground_truth
     from bagtools.transforms import tform2pose
 

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from bagtools.io import decode_laserscan, open_bag
-from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+from bagtools.commands.ndt_odom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
 from bagtools.trajectory import rpe_frames
 from bench.common import Row, best_time_s
 from bagtools_simulate.pipeline import SimConfig, simulate_bag

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.slam import SlamOptions, SlamPipeline, SlamResult, laser_odometry, write_slam
+from bagtools.commands.slam import SlamOptions, SlamPipeline, SlamResult, laser_odometry, write_slam
 from bagtools.transforms import se2_between, tform2pose, wrap_to_pi
 from bench.bench_ndt import point_to_plane_icp
 from bench.common import Row

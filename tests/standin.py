@@ -19,7 +19,7 @@ import numpy as np
 
 from bagtools.dataset import ScanStream
 from bagtools.io import open_bag, read_tf_arrays
-from bagtools.ndtodom import NdtOdomResult
+from bagtools.commands.ndt_odom import NdtOdomResult
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.simtruth import read_ground_truth
 from bagtools.tf import TfBuffer
@@ -124,7 +124,7 @@ def as_front_end_result(bag_path: str | Path, run: FrontEndRun, with_truth: bool
 
 
 def standin(drift: Drift = Drift(), seed: int = 0):
-    """A front end for :class:`~bagtools.slam.SlamPipeline`: :func:`front_end_from_truth` as the front end's result."""
+    """A front end for :class:`~bagtools.commands.slam.SlamPipeline`: :func:`front_end_from_truth` as the front end's result."""
     def front_end(bag_path, options) -> NdtOdomResult:
         return as_front_end_result(bag_path, front_end_from_truth(bag_path, options.topic, drift, seed))
     return front_end

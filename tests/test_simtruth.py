@@ -8,7 +8,7 @@ import numpy as np
 
 from bagtools.io import open_bag
 from bagtools.simtruth import read_ground_truth
-from tests.ndtodom.conftest import make_odometry, write_bag
+from tests.ndt_odom.conftest import make_odometry, write_bag
 
 
 def test_a_reference_that_jumps_1_km_is_said_and_a_smooth_one_is_not(tmp_path: Path) -> None:

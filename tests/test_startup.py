@@ -24,7 +24,7 @@ def test_the_cli_and_every_command_module_import_nothing_heavy() -> None:
 
 
 def test_info_imports_nothing_heavy() -> None:
-    assert _imported_after("import bagtools.baginfo") == []
+    assert _imported_after("import bagtools.commands.info") == []
 
 
 def _cli_env(user_setting: str | None) -> str:

@@ -106,7 +106,7 @@ def _info_options(params: Mapping[str, Any]) -> None:
 
 
 def _info(bag: str, out_dir: Path, options: None, force: bool) -> JobOutput:
-    from bagtools.baginfo import describe_bag
+    from bagtools.commands.info import describe_bag
 
     check_outputs(out_dir, INFO_FILES, force)
     desc = describe_bag(bag)
@@ -121,14 +121,14 @@ def _info(bag: str, out_dir: Path, options: None, force: bool) -> JobOutput:
 
 
 def _map_cloud_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.cloudmap import CloudMapOptions
+    from bagtools.commands.map_cloud import CloudMapOptions
 
     return WriterConfig(CloudMapOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.cloudmap import CloudMapPipeline, write_cloud_map
-    from bagtools.cloudmap.writer import cloud_map_outputs
+    from bagtools.commands.map_cloud import CloudMapPipeline, write_cloud_map
+    from bagtools.commands.map_cloud.writer import cloud_map_outputs
 
     check_outputs(out_dir, cloud_map_outputs(config.mcap, config.options.refine), force)
     result = CloudMapPipeline(bag, config.options, keep_inputs=config.mcap).run()
@@ -140,7 +140,7 @@ def _map_cloud(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Jo
 
 
 def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.gridmap import GridMapOptions
+    from bagtools.commands.grid import GridMapOptions
     from bagtools.trajectory import read_tum
 
     if p["poses"] not in ("tf", "ground-truth"):
@@ -150,7 +150,7 @@ def _grid_options(p: Mapping[str, Any]) -> WriterConfig:
 
 
 def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.gridmap import GRID_MAP_FILES, GridMapPipeline, write_grid_map
+    from bagtools.commands.grid import GRID_MAP_FILES, GridMapPipeline, write_grid_map
 
     check_outputs(out_dir, run_outputs(GRID_MAP_FILES, config.mcap), force)
     result = GridMapPipeline(bag, config.options, keep_scans=config.mcap).run()
@@ -162,13 +162,13 @@ def _grid(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutp
 
 
 def _ndt_odom_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.ndtodom import NdtOdomOptions
+    from bagtools.commands.ndt_odom import NdtOdomOptions
 
     return WriterConfig(NdtOdomOptions.from_params(p), mcap=not p["no_mcap"])
 
 
 def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomPipeline, write_ndt_odom
+    from bagtools.commands.ndt_odom import NDT_ODOM_FILES, NdtOdomPipeline, write_ndt_odom
 
     check_outputs(out_dir, run_outputs(NDT_ODOM_FILES, config.mcap), force)
     result = NdtOdomPipeline(bag, config.options, keep_scans=config.mcap).run()
@@ -182,7 +182,7 @@ def _ndt_odom(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> Job
 
 
 def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
-    from bagtools.slam import SlamOptions
+    from bagtools.commands.slam import SlamOptions
     from bagtools.trajectory import read_relations
 
     if p["relations"]:
@@ -192,7 +192,7 @@ def _slam_options(p: Mapping[str, Any]) -> WriterConfig:
 
 
 def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.slam import SLAM_FILES, SlamPipeline, write_slam
+    from bagtools.commands.slam import SLAM_FILES, SlamPipeline, write_slam
 
     check_outputs(out_dir, run_outputs(SLAM_FILES, config.mcap), force)
     result = SlamPipeline(bag, config.options).run()
@@ -205,14 +205,14 @@ def _slam(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutp
 
 def _localize_options(p: Mapping[str, Any]) -> WriterConfig:
     from bagtools.grid import read_nav2_map
-    from bagtools.localize import LocalizeOptions
+    from bagtools.commands.localize import LocalizeOptions
 
     read_nav2_map(p["map_yaml"])  # a missing or bad map is one error before any work
     return WriterConfig((str(p["map_yaml"]), LocalizeOptions.from_params(p)), mcap=not p["no_mcap"])
 
 
 def _localize(bag: str, out_dir: Path, config: WriterConfig, force: bool) -> JobOutput:
-    from bagtools.localize import LOCALIZE_FILES, LocalizePipeline, write_localize
+    from bagtools.commands.localize import LOCALIZE_FILES, LocalizePipeline, write_localize
 
     check_outputs(out_dir, run_outputs(LOCALIZE_FILES, config.mcap), force)
     map_yaml, options = config.options

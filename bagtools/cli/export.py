@@ -46,7 +46,7 @@ def export(bag: str, topic: str, out: str, force: bool, keep_nan: bool) -> None:
       bagtools export out/sim /camera/depth/points --out points.npz --force
       python -c "import pandas as pd; print(pd.read_parquet('scans.parquet'))"
     """
-    from bagtools.export import export_topic
+    from bagtools.commands.export import export_topic
 
     summary = export_topic(bag, topic, out, force, keep_nan=keep_nan)
     for warning in summary.warnings:

@@ -52,7 +52,7 @@ def grid(bag: str, out_dir: str, topic: str, poses: str, frame: str | None, cell
       bagtools grid run.mcap --out grid_ndt --poses ndt/trajectory.tum
       bagtools grid real.bag --out grid --scan-frame-offset -0.064,0,0 --no-mcap
     """
-    from bagtools.gridmap import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
+    from bagtools.commands.grid import GRID_MAP_FILES, GridMapOptions, GridMapPipeline, write_grid_map
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
 

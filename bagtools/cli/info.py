@@ -24,7 +24,7 @@ def info(bag: str, as_json: bool) -> None:
       bagtools info out/turtlebot3_sim
       bagtools info recording.mcap --json > info.json
     """
-    from bagtools.baginfo import describe_bag, format_description
+    from bagtools.commands.info import describe_bag, format_description
 
     desc = describe_bag(bag)
     for warning in desc.warnings:

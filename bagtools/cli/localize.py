@@ -58,7 +58,7 @@ def localize(bag: str, map_yaml: str, out_dir: str, topic: str, initial_pose: tu
       bagtools localize robot.mcap --map building/map.yaml --out loc --no-odometry
       bagtools localize robot.mcap --map building/map.yaml --out loc --initial-pose 2.0,-1.5,1.57
     """
-    from bagtools.localize import LOCALIZE_FILES, LocalizeOptions, LocalizePipeline, write_localize
+    from bagtools.commands.localize import LOCALIZE_FILES, LocalizeOptions, LocalizePipeline, write_localize
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
 

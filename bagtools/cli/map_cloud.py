@@ -47,8 +47,8 @@ def map_cloud(bag: str, out_dir: str, topic: str, frame: str, stamp: str, sample
       bagtools map-cloud run.mcap --out odom_map --frame odom --stamp latest --no-mcap
       bagtools map-cloud run.mcap --out sharp_map --frame odom --refine
     """
-    from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, write_cloud_map
-    from bagtools.cloudmap.writer import cloud_map_outputs
+    from bagtools.commands.map_cloud import CloudMapOptions, CloudMapPipeline, write_cloud_map
+    from bagtools.commands.map_cloud.writer import cloud_map_outputs
     from bagtools.outputs import check_outputs
 
     check_outputs(out_dir, cloud_map_outputs(not no_mcap, refine), force, inputs=[bag])  # fail before the work

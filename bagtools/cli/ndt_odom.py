@@ -65,7 +65,7 @@ def ndt_odom(bag: str, out_dir: str, topic: str, init: str, no_search: bool, no_
       bagtools ndt-odom real.bag --out ndt --scan-frame-offset -0.064,0,0 --no-odometry --no-mcap
     """
     from bagtools.errors import BagtoolsError
-    from bagtools.ndtodom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+    from bagtools.commands.ndt_odom import NDT_ODOM_FILES, NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
 

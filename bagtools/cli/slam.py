@@ -60,7 +60,7 @@ def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_
     """
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
-    from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
+    from bagtools.commands.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
 
     side, note = map_cell_side(cell_size, cells_per_metre, resolution, resolution_in_metres=True)
 

@@ -59,7 +59,7 @@ def map_cell_size(cell_size_m: float | None, cells_per_metre: float | None, reso
 
 @dataclass(frozen=True)
 class GridMapOptions:
-    """Options of :class:`~bagtools.gridmap.GridMapPipeline`.
+    """Options of :class:`~bagtools.commands.grid.GridMapPipeline`.
 
     ``poses``: 'tf' (the scan frame's pose in ``frame`` from the bag's tf at each
     scan stamp), 'ground-truth' (the simulator's ``/ground_truth``, in map), or

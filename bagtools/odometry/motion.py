@@ -3,7 +3,7 @@
 A step is predicted by the wheel odometry's motion since the last scan, or, without odometry, by constant velocity.
 Each prediction comes with standard deviations (m, m, rad) that grow with the motion: a floor plus a share of the
 distance and of the turn. The front end (:mod:`bagtools.odometry.frontend`) and the localizer
-(:mod:`bagtools.localize.tracker`) take them from here, so that a change to the model changes both.
+(:mod:`bagtools.commands.localize.tracker`) take them from here, so that a change to the model changes both.
 
 Poses and motions are planar [x, y, theta] (m, m, rad).
 """

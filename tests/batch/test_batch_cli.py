@@ -19,7 +19,7 @@ from bagtools.batch.bags import BATCH_LOCK, BATCH_MANIFEST
 from bagtools.batch.jobs import JOBS
 from bagtools.batch.task import MARKER
 from bagtools.cli import main
-from bagtools.gridmap import GRID_MAP_FILES
+from bagtools.commands.grid import GRID_MAP_FILES
 from tests.batch.conftest import Fleet, tree_state
 
 REPO = Path(__file__).resolve().parents[2]

@@ -15,7 +15,7 @@ from bagtools.batch.task import (
     FAILED, MARKER, OK, SKIPPED, BagTask, ForeignOutputError, check_owner, completed_row, read_marker, run_task,
 )
 from bagtools.cli import COMMANDS, cli, main
-from bagtools.gridmap import GRID_MAP_FILES
+from bagtools.commands.grid import GRID_MAP_FILES
 from tests.batch.conftest import Fleet
 from tests.conftest import FIXTURES
 
@@ -102,11 +102,11 @@ class _Built(Exception):
 
 
 @pytest.mark.parametrize("command, pipeline, args", [
-    ("slam", "bagtools.slam.SlamPipeline", ["--no-odometry", "--loop-min-score", "0.6", "--cell-size", "0.1"]),
-    ("ndt-odom", "bagtools.ndtodom.NdtOdomPipeline", ["--reference", "previous", "--max-speed", "0.7", "--holonomic"]),
-    ("grid", "bagtools.gridmap.GridMapPipeline", ["--resolution", "10", "--max-range", "8"]),
-    ("map-cloud", "bagtools.cloudmap.CloudMapPipeline", ["--voxel", "0.05", "--seed", "3"]),
-    ("localize", "bagtools.localize.LocalizePipeline", ["--no-smoothing", "--initial-pose", "1,2,0.5"]),
+    ("slam", "bagtools.commands.slam.SlamPipeline", ["--no-odometry", "--loop-min-score", "0.6", "--cell-size", "0.1"]),
+    ("ndt-odom", "bagtools.commands.ndt_odom.NdtOdomPipeline", ["--reference", "previous", "--max-speed", "0.7", "--holonomic"]),
+    ("grid", "bagtools.commands.grid.GridMapPipeline", ["--resolution", "10", "--max-range", "8"]),
+    ("map-cloud", "bagtools.commands.map_cloud.CloudMapPipeline", ["--voxel", "0.05", "--seed", "3"]),
+    ("localize", "bagtools.commands.localize.LocalizePipeline", ["--no-smoothing", "--initial-pose", "1,2,0.5"]),
 ])
 def test_the_command_and_its_job_build_the_same_options(command: str, pipeline: str, args: list[str], tmp_path: Path,
                                                          monkeypatch) -> None:

@@ -219,8 +219,8 @@ def test_a_full_disk_is_said_and_names_the_output(tmp_path: Path, capsys, monkey
     directory's failure named the input bag. Both now say 'No space left on device' of the output."""
     import errno
 
-    from bagtools.export import sinks
-    from bagtools.gridmap import writer as grid_writer
+    from bagtools.commands.export import sinks
+    from bagtools.commands.grid import writer as grid_writer
 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))

@@ -10,7 +10,7 @@ import pytest
 
 from bagtools.cli import main
 from bagtools.grid import read_nav2_map
-from bagtools.gridmap import GRID_MAP_FILES
+from bagtools.commands.grid import GRID_MAP_FILES
 from tests.conftest import FIXTURES, make_scan, make_tf, write_bag
 
 S = 1_000_000_000

@@ -71,7 +71,7 @@ def test_bad_input_one_line_exit_2_and_no_output(tmp_path: Path, args, problem: 
 
 
 def test_failure_while_writing_leaves_nothing(tmp_path: Path, monkeypatch) -> None:
-    from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline, writer
+    from bagtools.commands.map_cloud import CloudMapOptions, CloudMapPipeline, writer
 
     result = CloudMapPipeline(FIXTURE, CloudMapOptions()).run()
 

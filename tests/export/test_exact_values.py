@@ -13,8 +13,8 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-import bagtools.export.sinks as sinks
-from bagtools.export import export_topic
+import bagtools.commands.export.sinks as sinks
+from bagtools.commands.export import export_topic
 from bagtools.io import open_bag
 
 MSGTYPE = "bagtools_test/msg/Extremes"

@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 
 from bagtools.errors import BagtoolsError
-from bagtools.export import export_topic
+from bagtools.commands.export import export_topic
 from bagtools.io import decode_laserscan, decode_odometry, decode_pointcloud2, decode_tf_message, open_bag
-from tests.cloudmap.test_attributes import INTENSITY, RGB, XYZ, make_xyzir_cloud
+from tests.map_cloud.test_attributes import INTENSITY, RGB, XYZ, make_xyzir_cloud
 from tests.conftest import TYPESTORE, _header, make_scan, write_bag
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "sim_lap_cloud_20s"

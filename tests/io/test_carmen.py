@@ -223,7 +223,7 @@ def test_a_bag_written_as_a_flaser_log_reads_back(tmp_path: Path) -> None:
     with the odometry pose nearest its stamp."""
     from bagtools.io.carmen import write_flaser_log
     from tests.conftest import make_scan, write_bag
-    from tests.ndtodom.conftest import make_odometry
+    from tests.ndt_odom.conftest import make_odometry
 
     t0 = 1_700_000_000_123_456_000
     rng = np.random.default_rng(0)

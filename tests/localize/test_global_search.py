@@ -1,4 +1,4 @@
-"""The global search of ``bagtools.localize``: one scan placed in a whole map, at any heading, no initial pose."""
+"""The global search of ``bagtools.commands.localize``: one scan placed in a whole map, at any heading, no initial pose."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from bagtools.grid import read_nav2_map, write_nav2_map
-from bagtools.gridmap import GridMapOptions, GridMapPipeline
+from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
-from bagtools.localize import GlobalLocalizer
-from bagtools.ndtodom import run_front_end
+from bagtools.commands.localize import GlobalLocalizer
+from bagtools.commands.ndt_odom import run_front_end
 from bagtools.simtruth import read_ground_truth
 from bagtools.transforms import tform2pose
 

@@ -13,11 +13,11 @@ import pytest
 
 from bagtools.cli import main
 from bagtools.grid import OccupancyGrid, read_nav2_map, write_nav2_map
-from bagtools.gridmap import GridMapOptions, GridMapPipeline
+from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
-from bagtools.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
-from bagtools.localize import tracker
-from bagtools.localize.settings import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
+from bagtools.commands.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
+from bagtools.commands.localize import tracker
+from bagtools.commands.localize.settings import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from bagtools_simulate.world import World
@@ -611,7 +611,7 @@ def _rectangle_map(directory: Path, width_m: float, height_m: float) -> Path:
 def test_a_huge_mostly_unknown_map_is_drawn_from_its_known_part_in_place(world: dict, tmp_path: Path) -> None:
     """The picture's and results.mcap's grid of a 4000 x 4000 image holding the map in one corner is cut to the
     known cells (#42: a 12000 x 12000 map took 35 s and 5 GB): every occupied cell keeps its world position."""
-    from bagtools.localize.writer import map_grid
+    from bagtools.commands.localize.writer import map_grid
 
     small = read_nav2_map(world["map"])
     pixels = np.full((4000, 4000), 205, dtype=np.uint8)

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from bagtools.grid import write_nav2_map
-from bagtools.localize import LocalizeOptions, LocalizePipeline
-from bagtools.slam import SlamOptions, SlamPipeline
+from bagtools.commands.localize import LocalizeOptions, LocalizePipeline
+from bagtools.commands.slam import SlamOptions, SlamPipeline
 from bagtools.trajectory import read_relations
 from bagtools.trajectory.relations import relation_errors
 from tests.conftest import REPO, ros1_scan_slice

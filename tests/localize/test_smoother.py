@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from bagtools.localize.smoother import map_offset, revisit_factors, smooth_track
+from bagtools.commands.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.odometry.steps import ScanStep
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world import World
@@ -134,7 +134,7 @@ def test_a_robot_standing_still_gets_no_surer_of_the_map_for_each_scan(monkeypat
     map's error at that place; the laser odometry sees no motion). Weighed per scan, the standing scans outvote
     the drive and pull the robot there most of the way to the map's error; weighed per MAP_SPAN_M of path, they
     count as about one scan, and the drive's matches place it."""
-    from bagtools.localize import smoother
+    from bagtools.commands.localize import smoother
 
     rng = np.random.default_rng(6)
     truth = np.vstack([_path(), np.repeat(_path()[-1:], 300, axis=0)])

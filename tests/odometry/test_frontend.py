@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagtools.ndtodom import NdtOdomOptions, run_front_end
+from bagtools.commands.ndt_odom import NdtOdomOptions, run_front_end
 from bagtools.odometry import FrontEndOptions, LaserOdometry
 from bagtools.odometry.frontend import _constrained
 from bagtools.trajectory import rpe_frames

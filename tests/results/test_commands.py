@@ -78,7 +78,7 @@ def test_map_cloud_results_put_each_cloud_on_the_map(tmp_path: Path) -> None:
 
 def test_grid_results_map_is_what_map_server_loads(tmp_path: Path) -> None:
     from bagtools.grid import read_nav2_map
-    from bagtools.gridmap import GridMapOptions, GridMapPipeline, write_grid_map
+    from bagtools.commands.grid import GridMapOptions, GridMapPipeline, write_grid_map
 
     result = GridMapPipeline(FIXTURE, GridMapOptions(), keep_scans=True).run()
     write_grid_map(result, tmp_path / "grid")
@@ -101,7 +101,7 @@ def test_grid_results_map_is_what_map_server_loads(tmp_path: Path) -> None:
 
 
 def test_ndt_odom_results_hold_the_trajectories(tmp_path: Path) -> None:
-    from bagtools.ndtodom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
+    from bagtools.commands.ndt_odom import NdtOdomOptions, NdtOdomPipeline, write_ndt_odom
     from bagtools.trajectory import read_tum
 
     result = NdtOdomPipeline(FIXTURE, NdtOdomOptions(), keep_scans=True).run()

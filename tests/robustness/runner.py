@@ -55,7 +55,7 @@ def preload() -> None:
 
     for name in ("open3d", "scipy.spatial", "bagtools.cli", "bagtools.cli.info", "bagtools.cli.tf",
                  "bagtools.cli.map_cloud", "bagtools.cli.ndt_odom", "bagtools.cli.grid", "bagtools.cli.simulate",
-                 "bagtools.baginfo", "bagtools.cloudmap", "bagtools.ndtodom", "bagtools.gridmap", "bagtools.tf.point",
+                 "bagtools.commands.info", "bagtools.commands.map_cloud", "bagtools.commands.ndt_odom", "bagtools.commands.grid", "bagtools.tf.point",
                  "bagtools.tf.echo", "bagtools.tf.tree", "bagtools.tf.dot", "bagtools_simulate.pipeline"):
         try:
             importlib.import_module(name)

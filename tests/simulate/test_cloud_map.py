@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from bagtools.cloudmap import CloudMapOptions, CloudMapPipeline
+from bagtools.commands.map_cloud import CloudMapOptions, CloudMapPipeline
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
 BEFORE = {

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from bagtools.io.carmen import write_flaser_log
-from bagtools.slam import SlamOptions, SlamPipeline
+from bagtools.commands.slam import SlamOptions, SlamPipeline
 from bagtools.pose_graph.loops import ACCEPTED, FOLLOW_UP, SEES_THROUGH
 from tests.conftest import REPO, ros1_scan_slice
 

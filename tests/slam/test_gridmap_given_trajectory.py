@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bagtools.gridmap import GridMapOptions, GridMapPipeline
+from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.simtruth import read_ground_truth
 from bagtools.trajectory import Trajectory, write_tum

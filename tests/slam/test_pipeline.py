@@ -17,13 +17,13 @@ from bagtools.errors import BagtoolsError, TopicError
 from bagtools.grid import read_nav2_map
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph import build_pose_graph
-from bagtools.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, write_slam
+from bagtools.commands.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, write_slam
 from bagtools.trajectory.evaluate import align_se2
 from bagtools.pose_graph.loops import ACCEPTED
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
-from tests.ndtodom.conftest import scan_bag
+from tests.ndt_odom.conftest import scan_bag
 from bagtools_simulate.sensors.lidar import Lidar
 from tests.standin import CSAIL_DRIFT, Drift, as_front_end_result, front_end_from_truth, true_poses_at_scans
 
@@ -36,7 +36,7 @@ def _recorded(front: FrontEndRun, with_truth: bool = True):
 
 @pytest.fixture(scope="module")
 def figure8_slam(figure8_bag: Path, tmp_path_factory) -> tuple[SlamResult, Path]:
-    """SLAM of the long figure eight with the real front end (laser odometry of bagtools.ndtodom)."""
+    """SLAM of the long figure eight with the real front end (laser odometry of bagtools.commands.ndt_odom)."""
     result = SlamPipeline(figure8_bag, SlamOptions()).run()
     out = tmp_path_factory.mktemp("slam_out")
     write_slam(result, out)

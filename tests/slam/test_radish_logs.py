@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from bagtools.slam import SlamOptions, SlamPipeline
+from bagtools.commands.slam import SlamOptions, SlamPipeline
 from bagtools.trajectory.evaluate import ape_aligned
 from bagtools.trajectory import Trajectory, read_tum
 from bench.bench_slam_unseen import restamped

@@ -9,7 +9,7 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from bagtools.slam import SlamOptions, SlamPipeline, write_slam
+from bagtools.commands.slam import SlamOptions, SlamPipeline, write_slam
 from tests.conftest import FIXTURES
 
 

@@ -118,7 +118,7 @@ def test_a_bad_relations_file_is_refused_before_the_work(tmp_path: Path) -> None
 def test_uncertain_front_end_steps_are_said_on_the_summary_line(tmp_path: Path, monkeypatch) -> None:
     """Loops rejected are counted by reason on the summary line; steps the front end left uncertain (ambiguous:
     another place matched almost as well) are said there too, not only past a 3 % warning threshold."""
-    from bagtools.slam import SlamPipeline
+    from bagtools.commands.slam import SlamPipeline
 
     run = SlamPipeline.run
 

@@ -24,6 +24,6 @@ def test_running_median_equals_scipys(seed: int) -> None:
 
 
 def test_info_does_not_import_scipy_ndimage() -> None:
-    code = "import sys, bagtools.baginfo, bagtools.tf.repair; print('scipy.ndimage' in sys.modules)"
+    code = "import sys, bagtools.commands.info, bagtools.tf.repair; print('scipy.ndimage' in sys.modules)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "False", done.stdout + done.stderr
