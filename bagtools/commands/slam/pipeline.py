@@ -6,7 +6,7 @@
         _back_end()         keyframes as nodes, loop search, GTSAM optimization (bagtools.pose_graph.backend)
         _trajectories()     every scan's pose: a keyframe's optimized pose, or its keyframe's composed with
                             its match; the front end's alone
-        _map()              the occupancy grid at the optimized poses (bagtools.commands.grid)
+        _map()              the occupancy grid at the optimized poses (bagtools.grid.pipeline)
         _evaluate()         against the bag's /ground_truth (as the front end reads it): APE, RPE, aligned APE,
                             gap errors; against a .relations file when given (Kuemmerle et al.'s metric)
         _summary()
