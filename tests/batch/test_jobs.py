@@ -127,6 +127,26 @@ def test_the_command_and_its_job_build_the_same_options(command: str, pipeline: 
     assert built == [job[1] if command == "localize" else job]
 
 
+@pytest.mark.parametrize("command, options, differs", [
+    ("slam", "bagtools.commands.slam.SlamOptions", {"keep_scans": True}),  # results.mcap unless --no-mcap
+    ("ndt-odom", "bagtools.commands.ndt_odom.NdtOdomOptions", {}),
+    ("grid", "bagtools.commands.grid.GridMapOptions", {}),
+    ("map-cloud", "bagtools.commands.map_cloud.CloudMapOptions", {}),
+    ("localize", "bagtools.commands.localize.LocalizeOptions", {}),
+])
+def test_a_command_given_no_options_runs_with_its_options_defaults(command: str, options: str, differs: dict,
+                                                                  tmp_path: Path) -> None:
+    """The click options restate no default differently from the command's options dataclass (where the defaults
+    live): a default changed in one place only fails here."""
+    import dataclasses
+    import importlib
+
+    module, name = options.rsplit(".", 1)
+    cls = getattr(importlib.import_module(module), name)
+    built = cls.from_params(_params(command, _required_args(command, tmp_path)))
+    assert built == dataclasses.replace(cls(), **differs)
+
+
 @pytest.mark.parametrize("command, args", [
     ("grid", ["--resolution", "10"]),
     ("ndt-odom", ["--reference", "previous"]),
