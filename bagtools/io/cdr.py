@@ -34,7 +34,6 @@ from bagtools.io.decode import (
     decode_pointcloud2,
 )
 
-CDR_LE = b"\x00\x01"
 _U32 = struct.Struct("<I")
 _STAMP_AND_LENGTH = struct.Struct("<iII")  # sec, nanosec, frame_id length
 # A LaserScan's header is followed by angle_min, angle_max, angle_increment, time_increment, scan_time,

@@ -138,9 +138,6 @@ PRIMITIVE_DTYPES: dict[str, type] = {
 }
 #: Sequences (variable length) of these are binary data (an image, a cloud's bytes): exported as their length.
 BYTE_TYPES = ("byte", "char", "int8", "uint8")
-#: The export's own columns, which come first in every table; a message field of the same name is written as
-#: ``msg.NAME`` so that it cannot overwrite them.
-OWN_COLUMNS = ("stamp_ns", "log_time_ns", "frame_id")
 
 Definitions = Callable[[str], tuple[list, list]]
 """Message type -> rosbags' (constants, fields) of its definition (:meth:`bagtools.io.BagReader.field_definitions`)."""
