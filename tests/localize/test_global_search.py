@@ -12,7 +12,7 @@ from bagtools.grid import read_nav2_map, write_nav2_map
 from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.commands.localize import GlobalLocalizer
-from bagtools.commands.ndt_odom import run_front_end
+from bagtools.commands.ndt_odom import NdtOdomOptions, NdtOdomPipeline
 from bagtools.simtruth import read_ground_truth
 from bagtools.transforms import tform2pose
 
@@ -83,13 +83,14 @@ def test_real_csail_scans_are_placed_in_the_map_from_one_scan_each(real_dir: Pat
     options = GridMapOptions(poses="ground-truth", frame="map", resolution=20.0, max_range_m=20.0)  # as slam maps
     grid = GridMapPipeline(bag, options).run().grid
     localizer = GlobalLocalizer.from_map(read_nav2_map(write_nav2_map(grid, tmp_path / "map")))
-    front = run_front_end(bag)  # the scans in the base frame
     with open_bag(bag) as reader:
+        scans = NdtOdomPipeline(bag, NdtOdomOptions()).read_inputs(reader)  # the scans as the front end takes them
         stamps, T_map_base, _ = read_ground_truth(reader)  # as the map was made from
-    truth = tform2pose(T_map_base[np.searchsorted(stamps, front.front_end.stamps_ns())])
+    order = scans.order
+    truth = tform2pose(T_map_base[np.searchsorted(stamps, scans.stamps_ns[order])])
     rank = {}
     for k in range(5, 400, 20):
-        hyps = localizer.search(front.front_end.steps[k].points_base)
+        hyps = localizer.search(scans.points_base(int(order[k])))  # in the base frame
         right = [i for i, h in enumerate(hyps) if np.hypot(*(h.pose[:2] - truth[k, :2])) < 0.3
                  and abs(_angle(h.pose[2] - truth[k, 2])) < math.radians(3.0)]
         rank[k] = right[0] if right else None
