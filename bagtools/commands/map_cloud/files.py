@@ -24,22 +24,23 @@ def _packed_rgb(rgb: np.ndarray) -> np.ndarray:
     return (c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]
 
 
-def _pcd_records(cloud: MapCloud) -> np.ndarray:
-    names, formats = ["x", "y", "z"], ["<f4"] * 3
-    if cloud.intensity is not None:
-        names.append("intensity")
-        formats.append("<f4")
-    if cloud.rgb is not None:
-        names.append("rgb")
-        formats.append("<u4")  # the bits of PCL's float rgb
-    rec = np.empty(len(cloud), dtype=np.dtype({"names": names, "formats": formats}))
-    for k, axis in enumerate("xyz"):
-        rec[axis] = cloud.points[:, k]
-    if cloud.intensity is not None:
-        rec["intensity"] = cloud.intensity
-    if cloud.rgb is not None:
-        rec["rgb"] = _packed_rgb(cloud.rgb)
+def _records(columns: list[tuple[str, str, np.ndarray]]) -> np.ndarray:
+    """A structured array of (name, numpy format, values) columns, in their order: the binary body of a PCD or PLY."""
+    rec = np.empty(len(columns[0][2]), dtype=np.dtype({"names": [c[0] for c in columns],
+                                                       "formats": [c[1] for c in columns]}))
+    for name, _, values in columns:
+        rec[name] = values
     return rec
+
+
+def _xyz_intensity(cloud: MapCloud) -> list[tuple[str, str, np.ndarray]]:
+    columns = [(axis, "<f4", cloud.points[:, k]) for k, axis in enumerate("xyz")]
+    return columns + ([("intensity", "<f4", cloud.intensity)] if cloud.intensity is not None else [])
+
+
+def _pcd_records(cloud: MapCloud) -> np.ndarray:
+    rgb = [("rgb", "<u4", _packed_rgb(cloud.rgb))] if cloud.rgb is not None else []  # the bits of PCL's float rgb
+    return _records(_xyz_intensity(cloud) + rgb)
 
 
 def pcd_header(cloud: MapCloud, frame: str | None) -> str:
@@ -63,24 +64,11 @@ def pcd_header(cloud: MapCloud, frame: str | None) -> str:
 
 
 def _ply_records(cloud: MapCloud) -> tuple[np.ndarray, list[str]]:
-    names, formats, props = ["x", "y", "z"], ["<f4"] * 3, ["float x", "float y", "float z"]
-    if cloud.intensity is not None:
-        names.append("intensity")
-        formats.append("<f4")
-        props.append("float intensity")
+    columns = _xyz_intensity(cloud)
     if cloud.rgb is not None:
-        names += ["red", "green", "blue"]
-        formats += ["u1"] * 3
-        props += ["uchar red", "uchar green", "uchar blue"]
-    rec = np.empty(len(cloud), dtype=np.dtype({"names": names, "formats": formats}))
-    for k, axis in enumerate("xyz"):
-        rec[axis] = cloud.points[:, k]
-    if cloud.intensity is not None:
-        rec["intensity"] = cloud.intensity
-    if cloud.rgb is not None:
-        for k, channel in enumerate(("red", "green", "blue")):
-            rec[channel] = cloud.rgb[:, k]
-    return rec, props
+        columns += [(channel, "u1", cloud.rgb[:, k]) for k, channel in enumerate(("red", "green", "blue"))]
+    kinds = {"<f4": "float", "u1": "uchar"}
+    return _records(columns), [f"{kinds[fmt]} {name}" for name, fmt, _ in columns]
 
 
 def ply_header(cloud: MapCloud, frame: str | None, props: list[str]) -> str:
