@@ -29,10 +29,10 @@ from bagtools.odometry.options import (  # the method's fixed settings
     FrontEndOptions, normalized_score
 )
 from bagtools.odometry.prior import (
-    COVARIANCE_FLOOR, CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
+    CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
 )
 from bagtools.odometry.steps import FrontEndRun, ScanStep
-from bagtools.scan_matching import NdtReference, match_scans
+from bagtools.scan_matching import COVARIANCE_FLOOR, NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
 from bagtools.scan_matching.grid import voxel_mean
 from bagtools.transforms import wrap_to_pi

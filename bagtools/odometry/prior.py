@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bagtools.odometry.motion import PRIOR_WEIGHT_DEFAULT
+from bagtools.scan_matching.covariance import COVARIANCE_FLOOR, information_inverse
 # single poses, tens of calls per scan: without numpy's per-call overhead on 3-vectors
 from bagtools.transforms.planar import se2_between_fast as _between
 
@@ -31,8 +32,6 @@ LATERAL_SD_M, LATERAL_SD_RATIO = 0.05, 0.1
 #: Beyond what the robot can do in a step (max speed and turn rate x time), the prior's cost grows by one per
 #: this much more (m, rad).
 REACH_SD_M, REACH_SD_RAD = 0.05, 0.05
-#: The NDT Hessian's inverse is floored by this (m^2, m^2, rad^2): points are not independent.
-COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
 
 
 def ndt_covariance(hessian: np.ndarray, prior_information: np.ndarray | None = None) -> np.ndarray:
@@ -48,9 +47,7 @@ def ndt_covariance(hessian: np.ndarray, prior_information: np.ndarray | None = N
     information = (vectors * np.maximum(values, 0.0)) @ vectors.T
     if prior_information is not None:
         information = information + prior_information
-    values, vectors = np.linalg.eigh(information)
-    inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
-    return (vectors * inverse) @ vectors.T + COVARIANCE_FLOOR
+    return information_inverse(information) + COVARIANCE_FLOOR
 
 
 @dataclass
@@ -130,5 +127,5 @@ class MotionPrior:
 
 
 
-__all__ = ["COVARIANCE_FLOOR", "CV_OUTLIER_COST", "LATERAL_SD_M", "LATERAL_SD_RATIO", "OUTLIER_COST", "PRIOR_GATE2",
+__all__ = ["CV_OUTLIER_COST", "LATERAL_SD_M", "LATERAL_SD_RATIO", "OUTLIER_COST", "PRIOR_GATE2",
            "REACH_SD_M", "REACH_SD_RAD", "Match", "MotionPrior", "ndt_covariance"]

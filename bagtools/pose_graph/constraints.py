@@ -111,6 +111,7 @@ from bagtools.scan_matching import (
     MIN_SCAN_POINTS, CorrelativeReference, GridMatchResult, NdtReference, match_scans, match_scans_grid,
     match_scans_grid_peaks, voxel_subsample,
 )
+from bagtools.scan_matching.covariance import COVARIANCE_FLOOR, information_inverse
 from bagtools.grid.freespace import FreeSpace
 from bagtools.pose_graph.loops import (
     GLOBAL, LOCAL, LOOK_ALIKE, LOW_SCORE, REFINE_FAILED, SEES_THROUGH, TOO_FEW_POINTS, LoopCandidate, LoopOptions,
@@ -122,8 +123,6 @@ from bagtools.transforms import se2_between, se2_compose
 #: place outside it.
 COVER_SIGMAS = 2.0
 
-#: Added to every loop covariance (m^2, m^2, rad^2): 1 cm and 0.3 degrees, the laser odometry's floor for its edges.
-COVARIANCE_FLOOR = np.diag([1e-4, 1e-4, 3e-5])
 
 
 def _compose_with_covariance(a: np.ndarray, a_cov: np.ndarray, b: np.ndarray,
@@ -151,9 +150,7 @@ def _adjoint(T: np.ndarray) -> np.ndarray:
 
 def ndt_information_inverse(hessian: np.ndarray) -> np.ndarray:
     """Inverse of an NDT Hessian (3,3) on its positive eigenvalues; a direction without curvature gets 1e2."""
-    values, vectors = np.linalg.eigh(0.5 * (hessian + hessian.T))
-    inverse = np.where(values > 1e-6, 1.0 / np.maximum(values, 1e-6), 1e2)
-    return (vectors * inverse) @ vectors.T
+    return information_inverse(0.5 * (hessian + hessian.T))
 
 
 def loop_covariance(grid: GridMatchResult, ndt_hessian: np.ndarray, T_old_new: np.ndarray,

@@ -12,17 +12,20 @@ same pose convention, returns the best pose of the discretized window with a
 score and a covariance. Build a :class:`CorrelativeReference` once to match
 many scans against one reference or local map. ``match_scans_grid_peaks`` returns
 the window's distinct good poses (for scenes that repeat), best first.
+``COVARIANCE_FLOOR`` and ``information_inverse`` turn a match's precision into its
+covariance (:mod:`bagtools.scan_matching.covariance`).
 """
 
 from bagtools.scan_matching.correlative import (
     CorrelativeReference, GridMatchResult, match_scans_grid, match_scans_grid_peaks, match_scans_grid_ranges,
     voxel_subsample,
 )
+from bagtools.scan_matching.covariance import COVARIANCE_FLOOR, information_inverse
 from bagtools.scan_matching.grid import NdtReference
 from bagtools.scan_matching.matcher import MIN_SCAN_POINTS, NdtResult, match_scans, match_scans_ranges, ranges_to_points
 
 __all__ = [
-    "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult", "match_scans",
-    "match_scans_grid", "match_scans_grid_peaks", "match_scans_grid_ranges", "match_scans_ranges", "ranges_to_points",
-    "voxel_subsample",
+    "COVARIANCE_FLOOR", "MIN_SCAN_POINTS", "CorrelativeReference", "GridMatchResult", "NdtReference", "NdtResult",
+    "information_inverse", "match_scans", "match_scans_grid", "match_scans_grid_peaks", "match_scans_grid_ranges",
+    "match_scans_ranges", "ranges_to_points", "voxel_subsample",
 ]
