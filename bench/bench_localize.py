@@ -150,13 +150,13 @@ def scan_sequence(bag: Path):
     (N, 3) and the ground truth (N, 3) at the scan stamps."""
     from bagtools.io import open_bag
     from bagtools.odometry.options import NdtOdomOptions
-    from bagtools.odometry.pipeline import NdtOdomPipeline
+    from bagtools.odometry.pipeline import laser_dataset
     from bagtools.simtruth import read_ground_truth
     from bagtools.transforms import tform2pose
 
-    dataset = NdtOdomPipeline(bag, NdtOdomOptions())
+    dataset = laser_dataset(NdtOdomOptions())
     with open_bag(bag) as reader:
-        inputs = dataset.read_inputs(reader)
+        inputs = dataset.read(reader)
         stamps, T, _ = read_ground_truth(reader)
     truth = tform2pose(T)[np.searchsorted(stamps, inputs.stamps_ns).clip(0, len(stamps) - 1)]
     return inputs, tform2pose(inputs.odometry[0]), truth

@@ -12,7 +12,8 @@ from bagtools.grid import read_nav2_map, write_nav2_map
 from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.commands.localize import GlobalLocalizer
-from bagtools.commands.ndt_odom import NdtOdomOptions, NdtOdomPipeline
+from bagtools.commands.ndt_odom import NdtOdomOptions
+from bagtools.odometry.pipeline import laser_dataset
 from bagtools.simtruth import read_ground_truth
 from bagtools.transforms import tform2pose
 
@@ -84,7 +85,7 @@ def test_real_csail_scans_are_placed_in_the_map_from_one_scan_each(real_dir: Pat
     grid = GridMapPipeline(bag, options).run().grid
     localizer = GlobalLocalizer.from_map(read_nav2_map(write_nav2_map(grid, tmp_path / "map")))
     with open_bag(bag) as reader:
-        scans = NdtOdomPipeline(bag, NdtOdomOptions()).read_inputs(reader)  # the scans as the front end takes them
+        scans = laser_dataset(NdtOdomOptions()).read(reader)  # the scans as the front end takes them
         stamps, T_map_base, _ = read_ground_truth(reader)  # as the map was made from
     order = scans.order
     truth = tform2pose(T_map_base[np.searchsorted(stamps, scans.stamps_ns[order])])

@@ -35,7 +35,8 @@ from bagtools.commands.localize.hypotheses import Event
 from bagtools.commands.localize.settings import AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED
 from bagtools.commands.localize.tracker import MapLocalizer
 from bagtools.odometry.options import NdtOdomOptions
-from bagtools.odometry.pipeline import NdtOdomPipeline, ScanInputs
+from bagtools.dataset import LaserDataset, ScanInputs
+from bagtools.odometry.pipeline import laser_dataset, register_scans
 from bagtools.odometry import FrontEndRun
 from bagtools.progress import progress
 from bagtools.scan_matching import CorrelativeReference
@@ -175,17 +176,21 @@ class LocalizePipeline:
 
     # -- steps ------------------------------------------------------------------------------------
 
-    def _read(self, bag) -> tuple[NdtOdomPipeline, ScanInputs]:
+    def _front_end_options(self) -> NdtOdomOptions:
+        """ndt-odom's options with this run's topic, odometry and laser mount: the laser odometry the localizer's
+        motion prior is."""
+        return NdtOdomOptions(topic=self.options.topic, use_odometry=self.options.use_odometry,
+                              scan_frame_offset=self.options.scan_frame_offset)
+
+    def _read(self, bag) -> tuple[LaserDataset, ScanInputs]:
         """The scans as ndt-odom reads them: usable scans, recording order, odometry at the stamps, mount."""
-        dataset = NdtOdomPipeline(self.bag_path, NdtOdomOptions(
-            topic=self.options.topic, use_odometry=self.options.use_odometry,
-            scan_frame_offset=self.options.scan_frame_offset), keep_scans=self.keep_scans)
-        inputs = dataset.read_inputs(bag)
+        dataset = laser_dataset(self._front_end_options(), keep_scans=self.keep_scans)
+        inputs = dataset.read(bag)
         if len(inputs.stamps_ns) == 0:
             raise BagtoolsError(dataset.no_scan_problem(bag), self.bag_path)
         return dataset, inputs
 
-    def _localize(self, nav2_map: Nav2Map, dataset: NdtOdomPipeline,
+    def _localize(self, nav2_map: Nav2Map, dataset: LaserDataset,
                   inputs: ScanInputs) -> tuple[MapLocalizer, dict[int, np.ndarray], float]:
         """Every scan, in recording order, through the localizer, its motion prior the laser odometry (ndt-odom's
         front end: the scans matched to each other, with the wheel odometry when the bag has it and used), then
@@ -200,7 +205,7 @@ class LocalizePipeline:
         except ValueError as err:
             raise BagtoolsError(f"this map cannot be localized in: {err}", self.map_yaml) from err
         t0 = time.perf_counter()
-        front, odom = dataset.register(inputs)
+        front, odom = register_scans(inputs, self._front_end_options())
         self._front = front
         self.warnings.extend(front.warnings(self.options.topic))
         t1 = time.perf_counter()
@@ -224,7 +229,7 @@ class LocalizePipeline:
                          "smoothing": t3 - t2, "total": t3 - t0}
         return localizer, poses, t3 - t0
 
-    def _bag_localizer(self, bag: BagReader, dataset: NdtOdomPipeline, inputs: ScanInputs) -> Trajectory | None:
+    def _bag_localizer(self, bag: BagReader, dataset: LaserDataset, inputs: ScanInputs) -> Trajectory | None:
         """The bag's own map -> base at the scan stamps, or None: its localizer's map -> odom on /tf, composed with
         tf; else its /amcl_pose, carried between AMCL's updates by the odometry (AMCL holds its map -> odom from
         one update to the next: T_map_base(t) = T_map_base(k) T_odom_base(k)^-1 T_odom_base(t), k the last update
@@ -256,7 +261,7 @@ class LocalizePipeline:
         self.bag_localizer_source = f"{AMCL_POSE_TOPIC}, held between updates by {odom} -> {base}"
         return Trajectory(inputs.stamps_ns[after[ok]], T_map_odom[k[after[ok]]] @ T_now[ok])
 
-    def _ground_truth(self, bag, dataset: NdtOdomPipeline) -> Trajectory | None:
+    def _ground_truth(self, bag, dataset: LaserDataset) -> Trajectory | None:
         """The simulator's /ground_truth of the base (map frame), or None."""
         truth = read_ground_truth(bag, warnings=self.warnings)
         if truth is None or dataset.buffer is None:
