@@ -37,7 +37,7 @@ import tempfile
 from pathlib import Path
 
 from bagtools.io.carmen import write_flaser_log
-from bagtools.pose_graph.loops import SEES_THROUGH
+from bagtools.pose_graph.loops import LoopOutcome
 from bagtools.trajectory import read_relations, read_tum, relation_errors
 from bench.common import Row, bag_halves
 
@@ -123,7 +123,7 @@ def _half_runs(bag: Path, name: str, relations: Path, tmp: Path) -> list[Row]:
             inside = reference.within(int(trajectory.stamps_ns[0]), int(trajectory.stamps_ns[-1]))
             alone = relation_errors(inside, trajectory)
             whole = relation_errors(inside, read_tum(_out(tmp, name, mode) / "trajectory.tum"))
-            refused = s["loop_closure"]["rejected_by_reason"].get(SEES_THROUGH, 0)
+            refused = s["loop_closure"]["rejected_by_reason"].get(LoopOutcome.SEES_THROUGH, 0)
             rows.append(Row("slam benchmark", f"relations error mean, {name}'s {part} alone, {mode} (max "
                             f"{alone['trans_max_m']:.2f} m; {alone['used']} of {len(inside)} scored; "
                             f"{s['loop_closure']['accepted']} loops, {refused} refused as seeing through)",

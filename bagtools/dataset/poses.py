@@ -15,6 +15,7 @@ warning :data:`NO_SCAN_TRANSFORM_WARNING`.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Protocol
 
 import numpy as np
@@ -25,13 +26,14 @@ from bagtools.tf.repair import NO_SCAN_TRANSFORM_WARNING
 from bagtools.transforms import quat2xyzw, tform2quat
 
 
-REASON_UNKNOWN_FRAME = "scan frame not in tf"
-REASON_NOT_CONNECTED = "frames not connected"
-REASON_BEFORE = "before pose data"
-REASON_AFTER = "after pose data"
-REASON_NO_POSE = "no pose at stamp"
+class NoPose(StrEnum):
+    """Why a scan has no pose (the counts of skipped scans say these words)."""
 
-
+    UNKNOWN_FRAME = "scan frame not in tf"
+    NOT_CONNECTED = "frames not connected"
+    BEFORE = "before pose data"
+    AFTER = "after pose data"
+    NO_POSE = "no pose at stamp"
 
 
 class ScanPoseSource(Protocol):
@@ -51,10 +53,10 @@ def _reasons_by_span(valid: np.ndarray, stamps_ns: np.ndarray, span: tuple[int, 
     bad = ~valid
     if not bad.any():
         return reasons
-    reasons[bad] = REASON_NO_POSE
+    reasons[bad] = NoPose.NO_POSE
     if span is not None:
-        reasons[bad & (stamps_ns < span[0])] = REASON_BEFORE
-        reasons[bad & (stamps_ns > span[1])] = REASON_AFTER
+        reasons[bad & (stamps_ns < span[0])] = NoPose.BEFORE
+        reasons[bad & (stamps_ns > span[1])] = NoPose.AFTER
     return reasons
 
 
@@ -62,11 +64,11 @@ def _tf_lookup(buffer: TfBuffer, target: str, source: str, stamps_ns: np.ndarray
     """T_target_source (N,4,4) at ``stamps_ns`` and the reasons (see :class:`ScanPoseSource`); never raises for tf failures."""
     n = stamps_ns.size
     if not (buffer.has_frame(target) and buffer.has_frame(source)):
-        return np.full((n, 4, 4), np.nan), np.full(n, REASON_UNKNOWN_FRAME, dtype=object)
+        return np.full((n, 4, 4), np.nan), np.full(n, NoPose.UNKNOWN_FRAME, dtype=object)
     try:
         span = buffer.time_range(target, source)
     except TransformException:
-        return np.full((n, 4, 4), np.nan), np.full(n, REASON_NOT_CONNECTED, dtype=object)
+        return np.full((n, 4, 4), np.nan), np.full(n, NoPose.NOT_CONNECTED, dtype=object)
     T, valid = buffer.lookup(target, source, stamps_ns, return_mask=True)
     return T, _reasons_by_span(valid, stamps_ns, span)
 

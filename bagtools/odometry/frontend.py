@@ -21,12 +21,11 @@ from bagtools.odometry.motion import (  # the motion model, shared with the loca
     odometry_sd, steady_velocity_sd,
 )
 from bagtools.odometry.options import (  # the method's fixed settings
-    AGREE_M, AGREE_RAD, AMBIGUOUS, AMBIGUOUS_COVARIANCE, AMBIGUOUS_MARGIN, AMBIGUOUS_WARN_SHARE, BASIN_M, BASIN_RAD,
-    BEYOND_REACH, BEYOND_REACH_GAIN, CONTEST_MARGIN, CONTINUITY_SCORE_RATIO, CV_TURN_PER_M, DEGENERATE_RATIO,
-    FALLBACK, FINE_SCORE_RESOLUTION_M, FINE_SCORE_WINDOW, MAX_SEARCH_M, MIN_REFINE_CELL_M, MIN_WIDE_POINTS,
-    ODOM_REJECTED, REFINE_CELL_RATIO, REFINE_MAX_M, REFINE_MAX_RAD, SEARCHED, SEARCH_SIGMAS, SHORT_STEP_RATIO,
-    SUBMAP_RADIUS_M, TOO_FAST, WIDE_MAX_PRIOR_COST, WIDE_PEAKS, WIDE_PEAK_RATIO, WIDE_SUBMAP_KEYFRAMES,
-    FrontEndOptions, normalized_score
+    AGREE_M, AGREE_RAD, AMBIGUOUS_COVARIANCE, AMBIGUOUS_MARGIN, AMBIGUOUS_WARN_SHARE, BASIN_M, BASIN_RAD,
+    BEYOND_REACH_GAIN, CONTEST_MARGIN, CONTINUITY_SCORE_RATIO, CV_TURN_PER_M, DEGENERATE_RATIO,
+    FINE_SCORE_RESOLUTION_M, FINE_SCORE_WINDOW, MAX_SEARCH_M, MIN_REFINE_CELL_M, MIN_WIDE_POINTS, REFINE_CELL_RATIO,
+    REFINE_MAX_M, REFINE_MAX_RAD, SEARCH_SIGMAS, SHORT_STEP_RATIO, SUBMAP_RADIUS_M, WIDE_MAX_PRIOR_COST, WIDE_PEAKS,
+    WIDE_PEAK_RATIO, WIDE_SUBMAP_KEYFRAMES, FrontEndOptions, StepEvent, normalized_score,
 )
 from bagtools.odometry.prior import (
     CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
@@ -63,7 +62,7 @@ class LaserOdometry:
     def __init__(self, options: FrontEndOptions | None = None) -> None:
         self.options = options or FrontEndOptions()
         self.run = FrontEndRun()
-        self.counts: Counter[str] = Counter()
+        self.counts: Counter[StepEvent] = Counter()
         self._keyframe: _Keyframe | None = None
         self._last_odom: np.ndarray | None = None
         self._last_odom_pose = np.zeros(3)  # the pose of the step that had the odometry _last_odom
@@ -110,7 +109,7 @@ class LaserOdometry:
         matches = self._ndt_from_guesses(points, kf, guesses, prior)
         best = max(matches, key=prior.objective)
         if opts.search and self._needs_search(matches, best, dt, prior):
-            self.counts[SEARCHED] += 1
+            self.counts[StepEvent.SEARCHED] += 1
             searched = self._search(points, kf, prior, dt)
             if searched is not None:
                 matches.append(searched)
@@ -132,14 +131,14 @@ class LaserOdometry:
         self._steps_s.append(dt)
         self._after_short_step = suspect
         if beyond is not None:
-            self.counts[BEYOND_REACH] += 1
+            self.counts[StepEvent.BEYOND_REACH] += 1
             best, ambiguous = beyond, False
         else:
             best, ambiguous = self._decide(full, kf, matches, best, prior)
         if ambiguous:
-            self.counts[AMBIGUOUS] += 1
+            self.counts[StepEvent.AMBIGUOUS] += 1
         if best.score < opts.min_score:
-            self.counts[FALLBACK] += 1
+            self.counts[StepEvent.FALLBACK] += 1
             fallback = guesses.get("odom", guesses["constant-velocity"])
             best = Match(_between(kf.pose, fallback), best.score, np.diag([1.0, 1.0, 0.3]), "fallback")
         elif self._refine_cell_m is not None:
@@ -412,9 +411,9 @@ class LaserOdometry:
         """Count odometry the match contradicts beyond its noise, and steps faster than the robot can move."""
         step = _between(last.pose, pose)
         if prior.kind == "odometry" and best.source != "fallback" and prior.mahalanobis2(best.pose) > PRIOR_GATE2:
-            self.counts[ODOM_REJECTED] += 1
+            self.counts[StepEvent.ODOM_REJECTED] += 1
         if np.hypot(step[0], step[1]) > 2.0 * self.options.max_speed_mps * dt + 0.1:
-            self.counts[TOO_FAST] += 1
+            self.counts[StepEvent.TOO_FAST] += 1
 
     def _is_new_keyframe(self, match: Match) -> bool:
         opts = self.options
@@ -459,29 +458,29 @@ class LaserOdometry:
         """One line per kind of trouble, with counts (nothing when all went well)."""
         pairs = max(len(self.run.steps) - 1, 0)
         out = []
-        if self.counts[FALLBACK] and self.counts[FALLBACK] >= max(1, 0.02 * pairs):
-            out.append(f"{self.counts[FALLBACK]} of {pairs} scan pairs on {topic} could not be matched (score below "
+        if self.counts[StepEvent.FALLBACK] and self.counts[StepEvent.FALLBACK] >= max(1, 0.02 * pairs):
+            out.append(f"{self.counts[StepEvent.FALLBACK]} of {pairs} scan pairs on {topic} could not be matched (score below "
                        f"{self.options.min_score:g}) and kept their guess: the trajectory is less reliable there")
-        if self.counts[ODOM_REJECTED]:
-            out.append(f"{self.counts[ODOM_REJECTED]} odometry step(s) contradicted by the scan match beyond the "
+        if self.counts[StepEvent.ODOM_REJECTED]:
+            out.append(f"{self.counts[StepEvent.ODOM_REJECTED]} odometry step(s) contradicted by the scan match beyond the "
                        "odometry's noise (corrupt or slipping samples) were not followed")
-        if self.counts[AMBIGUOUS] >= max(3, AMBIGUOUS_WARN_SHARE * pairs):
-            out.append(f"{self.counts[AMBIGUOUS]} of {pairs} scan pairs on {topic} matched two places almost equally "
+        if self.counts[StepEvent.AMBIGUOUS] >= max(3, AMBIGUOUS_WARN_SHARE * pairs):
+            out.append(f"{self.counts[StepEvent.AMBIGUOUS]} of {pairs} scan pairs on {topic} matched two places almost equally "
                        "well (a repeating scene, or scans that overlap too little): the trajectory may be wrong there; "
                        "wheel odometry or scans closer together would settle it")
-        if self.counts[BEYOND_REACH]:
-            out.append(f"{self.counts[BEYOND_REACH]} scan(s) on {topic} matched only beyond what the robot can do in "
+        if self.counts[StepEvent.BEYOND_REACH]:
+            out.append(f"{self.counts[StepEvent.BEYOND_REACH]} scan(s) on {topic} matched only beyond what the robot can do in "
                        "their time step (a wrong stamp, or the robot carried) and were placed there")
-        if self.counts[TOO_FAST]:
-            out.append(f"{self.counts[TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
+        if self.counts[StepEvent.TOO_FAST]:
+            out.append(f"{self.counts[StepEvent.TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
                        "the robot can move: check the scans there")
         return out
 
     def summary_counts(self) -> dict[str, int]:
         pairs = max(len(self.run.steps) - 1, 0)
-        return {"pairs": pairs, "searched": self.counts[SEARCHED], "fallbacks": self.counts[FALLBACK],
-                "odometry_rejected": self.counts[ODOM_REJECTED], "faster_than_robot": self.counts[TOO_FAST],
-                "ambiguous": self.counts[AMBIGUOUS], "beyond_reach": self.counts[BEYOND_REACH],
+        return {"pairs": pairs, "searched": self.counts[StepEvent.SEARCHED], "fallbacks": self.counts[StepEvent.FALLBACK],
+                "odometry_rejected": self.counts[StepEvent.ODOM_REJECTED], "faster_than_robot": self.counts[StepEvent.TOO_FAST],
+                "ambiguous": self.counts[StepEvent.AMBIGUOUS], "beyond_reach": self.counts[StepEvent.BEYOND_REACH],
                 "keyframes": len(self.run.keyframe_indexes)}
 
 

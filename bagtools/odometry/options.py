@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -177,13 +178,18 @@ def normalized_score(score: float, n_points: int) -> float:
     return score / (4.0 * n_points) if n_points > 0 else 0.0
 
 
-# Counter keys (summary.json) and their one-line explanations (warnings).
-SEARCHED = "searched"
-FALLBACK = "fallback"
-ODOM_REJECTED = "odometry_rejected"
-TOO_FAST = "faster_than_robot"
-AMBIGUOUS = "ambiguous"
-BEYOND_REACH = "beyond_reach"
+class StepEvent(StrEnum):
+    """What the front end counts of its steps (:meth:`~bagtools.odometry.frontend.LaserOdometry.summary_counts`
+    gives each its summary.json key; its warnings say each in a line)."""
+
+    SEARCHED = "searched"
+    FALLBACK = "fallback"
+    ODOM_REJECTED = "odometry_rejected"
+    TOO_FAST = "faster_than_robot"
+    AMBIGUOUS = "ambiguous"
+    BEYOND_REACH = "beyond_reach"
+
+
 #: A step is ambiguous when another place scores within this much of the chosen one (normalized score less the
 #: prior's cost); more than AMBIGUOUS_WARN_SHARE of the pairs (and at least 3) is said in a warning.
 AMBIGUOUS_MARGIN = 0.05

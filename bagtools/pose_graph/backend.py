@@ -57,9 +57,7 @@ from bagtools.odometry.steps import ScanStep
 from bagtools.progress import progress
 from bagtools.pose_graph.consistency import ConsistencyCheck
 from bagtools.pose_graph.constraints import LoopClosureSearch
-from bagtools.pose_graph.loops import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, LOOK_ALIKE, OUTLIER, PENDING, LoopCandidate, LoopOptions,
-)
+from bagtools.pose_graph.loops import LoopCandidate, LoopKind, LoopOptions, LoopOutcome
 from bagtools.pose_graph.graph import LOOP, ODOMETRY, Constraint, Optimization, PoseGraph, check_covariance
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
@@ -246,11 +244,12 @@ class _Builder:
         matches = []
         for old in self.search.global_tiles(node, self.graph.poses):
             sigma_t, sigma_r = self.search.sigmas(distance[old])
-            cand = self.search.match(old, node, self.graph.poses, (float(sigma_t), float(sigma_r)), kind=GLOBAL)
+            cand = self.search.match(old, node, self.graph.poses, (float(sigma_t), float(sigma_r)),
+                                     kind=LoopKind.GLOBAL)
             self.counts["global matches tried"] += 1
             if cand.T_old_new is not None:
                 matches.append(cand)
-            elif cand.status == LOOK_ALIKE:
+            elif cand.status == LoopOutcome.LOOK_ALIKE:
                 self.counts["global look-alikes refused"] += 1
         if matches:
             best = max(matches, key=lambda c: c.score)
@@ -274,7 +273,7 @@ class _Builder:
         o = self.options.loop
         for p in self.check.to_follow_up():
             for node in range(p.new - o.new_map_keyframes - 1, max(p.new - o.pending_keyframes, 0) - 1, -1):
-                if p.status != PENDING or self._follow_up_at(p, node):
+                if p.status != LoopOutcome.PENDING or self._follow_up_at(p, node):
                     break
 
     def _follow_up_at(self, p: LoopCandidate, node: int) -> bool:
@@ -282,7 +281,8 @@ class _Builder:
         poses = self.graph.poses
         guess = se2_compose(p.T_old_new, se2_between(poses[p.new], poses[node]))
         sigma_t, sigma_r = self.search.sigmas(abs(self.search.path_m[node] - self.search.path_m[p.new]))
-        cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess, kind=FOLLOW_UP)
+        cand = self.search.match(p.old, node, poses, (float(sigma_t), float(sigma_r)), guess=guess,
+                                 kind=LoopKind.FOLLOW_UP)
         cand.follows = p
         self.candidates.append(cand)
         if cand.T_old_new is None:
@@ -338,9 +338,9 @@ class _Builder:
             self.graph.remove([loops[drop]])
             self._edges = []  # the graph distances are rebuilt from the remaining constraints
             for cand in self.check.accepted:
-                if cand.old == worst.i and cand.new == worst.j and cand.status == ACCEPTED:
-                    cand.status = OUTLIER
-            self.check.accepted = [c for c in self.check.accepted if c.status == ACCEPTED]
+                if cand.old == worst.i and cand.new == worst.j and cand.status == LoopOutcome.ACCEPTED:
+                    cand.status = LoopOutcome.OUTLIER
+            self.check.accepted = [c for c in self.check.accepted if c.status == LoopOutcome.ACCEPTED]
             self.optimizations.append(self.graph.optimize())
         self.counts.pop("large corrections", None)
         self._loops_since_optimization = 0
@@ -357,4 +357,4 @@ def build_pose_graph(steps: list[ScanStep], options: BackEndOptions | None = Non
     return _Builder(steps, options or BackEndOptions()).run()
 
 
-__all__ = ["BackEndOptions", "BackEndResult", "PENDING", "build_pose_graph"]
+__all__ = ["BackEndOptions", "BackEndResult", "LoopOutcome.PENDING", "build_pose_graph"]

@@ -7,9 +7,7 @@ import math
 
 import numpy as np
 
-from bagtools.pose_graph.loops import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOCAL, PENDING, UNCONFIRMED, LoopCandidate, LoopOptions,
-)
+from bagtools.pose_graph.loops import LoopCandidate, LoopKind, LoopOptions, LoopOutcome
 from bagtools.transforms import se2_between, se2_compose, wrap_to_pi
 
 
@@ -36,29 +34,29 @@ class ConsistencyCheck:
     def review(self, cand: LoopCandidate, poses: np.ndarray) -> list[LoopCandidate]:
         """Judge a matched candidate against the estimate ``poses``; returns the candidates accepted now."""
         o = self.options
-        if cand.kind == GLOBAL:  # the estimate may be off by what the drift model allows, given a wide margin
+        if cand.kind == LoopKind.GLOBAL:  # the estimate may be off by what the drift model allows, given a wide margin
             residual = se2_between(se2_between(poses[cand.old], poses[cand.new]), cand.T_old_new)
             gate_t, gate_r = self.gate(cand.sigma, o.global_gate_sigmas)
         else:
             residual = se2_between(cand.guess, cand.T_old_new)
             gate_t, gate_r = self.gate(cand.sigma)
         if np.hypot(residual[0], residual[1]) > gate_t or abs(wrap_to_pi(residual[2])) > gate_r:
-            cand.status = INCONSISTENT
+            cand.status = LoopOutcome.INCONSISTENT
             return []
-        if cand.kind == LOCAL and cand.sigma[0] <= o.sure_sigma_m:
-            cand.status = ACCEPTED
+        if cand.kind == LoopKind.LOCAL and cand.sigma[0] <= o.sure_sigma_m:
+            cand.status = LoopOutcome.ACCEPTED
             self.accepted.append(cand)
             return [cand]
         partners = [p for p in self.pending + self.accepted[-20:] if self._pair_consistent(cand, p, poses)]
         if not partners:
-            cand.status = PENDING
+            cand.status = LoopOutcome.PENDING
             self.pending.append(cand)
             return []
-        now = [cand] + [p for p in partners if p.status == PENDING]
+        now = [cand] + [p for p in partners if p.status == LoopOutcome.PENDING]
         for c in now:
-            c.status = ACCEPTED
+            c.status = LoopOutcome.ACCEPTED
             self.accepted.append(c)
-        self.pending = [p for p in self.pending if p.status == PENDING]
+        self.pending = [p for p in self.pending if p.status == LoopOutcome.PENDING]
         return now
 
     def supported(self, cand: LoopCandidate, poses: np.ndarray) -> bool:
@@ -94,14 +92,14 @@ class ConsistencyCheck:
         """The matches waiting for a second one that a follow-up may give: those whose window was wide and held no
         look-alike. A follow-up is searched in a small window where the match puts the robot, so it repeats the
         match's error if the match had one: only a match that is the one good place of a wide window is worth it."""
-        return [p for p in self.pending if p.kind != FOLLOW_UP and p.look_alike is False]
+        return [p for p in self.pending if p.kind != LoopKind.FOLLOW_UP and p.look_alike is False]
 
     def expire(self, newest: int) -> list[LoopCandidate]:
         """Reject pending matches older than ``pending_keyframes`` keyframes before ``newest``; returns them."""
         old = [p for p in self.pending if newest - p.new > self.options.pending_keyframes]
         for p in old:
-            p.status = UNCONFIRMED
-        self.pending = [p for p in self.pending if p.status == PENDING]
+            p.status = LoopOutcome.UNCONFIRMED
+        self.pending = [p for p in self.pending if p.status == LoopOutcome.PENDING]
         return old
 
     def flush(self) -> list[LoopCandidate]:

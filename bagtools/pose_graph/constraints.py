@@ -37,12 +37,12 @@ For each new keyframe ``b`` (:meth:`LoopClosureSearch.candidates`):
    otherwise, a corridor a few metres along) can score as well as the place.
    In a wide window (``wide_window_m`` and more) the search asks for it: a
    window where another place scores ``global_unique_ratio`` of the best is
-   refused (``LOOK_ALIKE``), as the global search's is; a second match cannot
+   refused (``LoopOutcome.LOOK_ALIKE``), as the global search's is; a second match cannot
    tell the two apart, since a corridor's look-alike shifts every match of it
    alike. A look-alike also puts walls in both maps' open space; a world that changed between the
    visits (a door shut, a person passing) contradicts one map only. So a match
    where more than ``max_seen_through`` of each map's points lie where the
-   other saw through is refused (``SEES_THROUGH``).
+   other saw through is refused (``LoopOutcome.SEES_THROUGH``).
 3. **Covariance** (:func:`loop_covariance`): the ambiguity of the correlative
    search (Olson's likelihood-weighted spread around the best pose), the
    inverse NDT Hessian (large along a corridor, where the match is weak), the
@@ -113,9 +113,7 @@ from bagtools.scan_matching import (
 )
 from bagtools.scan_matching.covariance import COVARIANCE_FLOOR, information_inverse
 from bagtools.grid.freespace import FreeSpace
-from bagtools.pose_graph.loops import (
-    GLOBAL, LOCAL, LOOK_ALIKE, LOW_SCORE, REFINE_FAILED, SEES_THROUGH, TOO_FEW_POINTS, LoopCandidate, LoopOptions,
-)
+from bagtools.pose_graph.loops import LoopCandidate, LoopKind, LoopOptions, LoopOutcome
 from bagtools.transforms import se2_between, se2_compose
 
 #: A local match is followed up only when its window spans at least this many sigmas of the estimate's uncertainty
@@ -402,31 +400,31 @@ class LoopClosureSearch:
                    new_free.seen_through((old_map.points - T_old_new[:2]) @ R.T))
 
     def match(self, old: int, new: int, poses: np.ndarray, sigma: tuple[float, float],
-              guess: np.ndarray | None = None, kind: str = LOCAL) -> LoopCandidate:
+              guess: np.ndarray | None = None, kind: LoopKind = LoopKind.LOCAL) -> LoopCandidate:
         """Match keyframe ``new`` against the old map around ``old``; the record.
 
         ``sigma``: the uncertainty (m, rad) of the relative pose ``guess`` of
         ``new`` in ``old``'s frame (default: from the estimate ``poses``),
-        which sizes the window. ``kind=GLOBAL`` searches +- ``global_window_m``
+        which sizes the window. ``kind=LoopKind.GLOBAL`` searches +- ``global_window_m``
         around ``old`` itself and every heading, with ``global_min_score``.
         """
         o = self.options
         t0 = time.perf_counter()
         min_score = o.min_score
-        if kind == GLOBAL:
+        if kind == LoopKind.GLOBAL:
             guess, window, min_score = np.zeros(3), np.array([o.global_window_m, o.global_window_m, math.pi]), \
                 o.global_min_score
         else:
             guess = se2_between(poses[old], poses[new]) if guess is None else np.asarray(guess, dtype=np.float64)
             window = self.window(sigma)
         cand = LoopCandidate(old, new, guess, window, (float(sigma[0]), float(sigma[1])), kind=kind)
-        old_map = self._old_map(old, poses, cache=kind != GLOBAL)
+        old_map = self._old_map(old, poses, cache=kind != LoopKind.GLOBAL)
         new_scans = self._placed(self._new_range(new), poses, poses[new])
         current = self._new_map(new_scans)
         reach = min(math.sqrt(float(np.einsum("ij,ij->i", current, current).max(initial=0.0))), o.angular_reach_m)
         search = dict(initial_pose=guess, search_range=window, angular_resolution_rad=self.angular_step(reach),
                       min_score=min_score)
-        if kind == GLOBAL or window[0] >= o.wide_window_m:
+        if kind == LoopKind.GLOBAL or window[0] >= o.wide_window_m:
             # anywhere in the map, or a window wide enough to hold a corridor's look-alikes: is the place the
             # window's one good match?
             peaks = match_scans_grid_peaks(current, old_map.correlative, max_peaks=2, min_ratio=o.global_unique_ratio,
@@ -434,13 +432,14 @@ class LoopClosureSearch:
             # uniqueness in a window capped (at the search radius or a full turn) short of COVER_SIGMAS of the
             # estimate's uncertainty says little of the places outside it: such a match is not followed up
             capped = bool(window[0] < COVER_SIGMAS * sigma[0] or window[2] < COVER_SIGMAS * sigma[1])
-            cand.look_alike = len(peaks) > 1 or (kind != GLOBAL and capped)
+            cand.look_alike = len(peaks) > 1 or (kind != LoopKind.GLOBAL and capped)
             # Another place scoring as well is refused, local or global: an independent second match cannot
             # tell the two apart (a corridor's look-alike shifts every match of it alike, and the chains between
             # them allow metres after a long loop), so a pair of look-alikes would enter the graph and bend it.
             if len(peaks) != 1:  # none: nothing scores global_min_score (the search is not run again for why)
                 too_few = min(len(current), old_map.correlative.n_points) < MIN_SCAN_POINTS
-                cand.status = LOOK_ALIKE if peaks else TOO_FEW_POINTS if too_few else LOW_SCORE
+                cand.status = (LoopOutcome.LOOK_ALIKE if peaks else LoopOutcome.TOO_FEW_POINTS if too_few
+                               else LoopOutcome.LOW_SCORE)
                 cand.score = float(peaks[0].score) if peaks else 0.0
                 cand.time_s = time.perf_counter() - t0
                 return cand
@@ -448,16 +447,16 @@ class LoopClosureSearch:
         else:
             grid = match_scans_grid(current, old_map.correlative, **search)
         if not grid.ok:
-            cand.status = TOO_FEW_POINTS if "too few" in grid.reason else LOW_SCORE
+            cand.status = LoopOutcome.TOO_FEW_POINTS if "too few" in grid.reason else LoopOutcome.LOW_SCORE
             cand.time_s = time.perf_counter() - t0
             return cand
         ndt = match_scans(current, old_map.ndt, initial_pose=grid.pose, max_iterations=50)
         moved = se2_between(grid.pose, ndt.pose)
         cand.score = float(grid.score)
         if ndt.score <= 0 or np.hypot(moved[0], moved[1]) > o.max_refine_m or abs(moved[2]) > o.max_refine_rad:
-            cand.status = REFINE_FAILED
+            cand.status = LoopOutcome.REFINE_FAILED
         elif self._seen_through(old_map, new_scans, ndt.pose) > o.max_seen_through:
-            cand.status = SEES_THROUGH
+            cand.status = LoopOutcome.SEES_THROUGH
         else:
             cand.T_old_new = ndt.pose
             cand.covariance = loop_covariance(grid, ndt.hessian, ndt.pose, old_map.covariance,

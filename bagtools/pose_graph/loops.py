@@ -6,24 +6,34 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
 from bagtools.transforms import se2_between
 
-# Candidate outcomes (summary.json counts them).
-ACCEPTED = "accepted"
-PENDING = "pending"
-LOW_SCORE = "score below min_score"
-REFINE_FAILED = "NDT refinement failed or moved away"
-INCONSISTENT = "disagrees with the estimate"
-UNCONFIRMED = "unconfirmed: no consistent second match"
-OUTLIER = "outlier after optimization"
-# Candidate kinds: searched around the estimate, anywhere, or around a pending global match.
-LOCAL, GLOBAL, FOLLOW_UP = "local", "global", "follow-up"
-TOO_FEW_POINTS = "too few points"
-LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
-SEES_THROUGH = "walls where the other map saw through"
+
+class LoopOutcome(StrEnum):
+    """What became of a loop candidate: its ``status`` (summary.json counts candidates by these words)."""
+
+    ACCEPTED = "accepted"
+    PENDING = "pending"
+    LOW_SCORE = "score below min_score"
+    REFINE_FAILED = "NDT refinement failed or moved away"
+    INCONSISTENT = "disagrees with the estimate"
+    UNCONFIRMED = "unconfirmed: no consistent second match"
+    OUTLIER = "outlier after optimization"
+    TOO_FEW_POINTS = "too few points"
+    LOOK_ALIKE = "a look-alike elsewhere in the window scores as well"
+    SEES_THROUGH = "walls where the other map saw through"
+
+
+class LoopKind(StrEnum):
+    """Where a candidate was searched: around the estimate, anywhere, or around a pending global match."""
+
+    LOCAL = "local"
+    GLOBAL = "global"
+    FOLLOW_UP = "follow-up"
 
 
 @dataclass(frozen=True)
@@ -99,8 +109,8 @@ class LoopCandidate:
     ``window``: the search half-widths (m, m, rad); ``sigma``: the estimate's
     uncertainty of it (m, rad); ``T_old_new``, ``covariance``: the match (None
     when it failed); ``score``: correlative score in [0, 1]; ``status``:
-    ``ACCEPTED``, ``PENDING`` or why it was rejected; ``time_s``: match time;
-    ``kind``: ``LOCAL`` (around the estimate), ``GLOBAL`` (anywhere) or ``FOLLOW_UP`` (around a pending global
+    a :class:`LoopOutcome`: accepted, pending or why it was rejected; ``time_s``: match time;
+    ``kind``: a :class:`LoopKind`: local (around the estimate), global (anywhere) or follow-up (around a pending global
     match).
     """
 
@@ -112,9 +122,9 @@ class LoopCandidate:
     T_old_new: np.ndarray | None = None
     covariance: np.ndarray | None = None
     score: float = 0.0
-    status: str = PENDING
+    status: LoopOutcome = LoopOutcome.PENDING
     time_s: float = 0.0
-    kind: str = LOCAL
+    kind: LoopKind = LoopKind.LOCAL
     look_alike: bool | None = None  # another place of the window scores as well (None: the window was not asked)
     follows: LoopCandidate | None = None  # for a follow-up: the match it was searched around
 

@@ -7,9 +7,7 @@ import pytest
 
 from bagtools.pose_graph.consistency import ConsistencyCheck
 from bagtools.pose_graph.constraints import LoopClosureSearch, voxel_subsample
-from bagtools.pose_graph.loops import (
-    ACCEPTED, FOLLOW_UP, GLOBAL, INCONSISTENT, LOOK_ALIKE, PENDING, SEES_THROUGH, UNCONFIRMED, LoopCandidate, LoopOptions,
-)
+from bagtools.pose_graph.loops import LoopCandidate, LoopKind, LoopOptions, LoopOutcome
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.world.world import World
 from tests.standin import true_poses_at_scans
@@ -93,8 +91,8 @@ def test_global_match_finds_the_place_whatever_the_estimate_says(figure8_bag, fi
     truth_rel = se2_between(poses[old], poses[new])
     assert local.T_old_new is None or np.hypot(*se2_between(truth_rel, local.T_old_new)[:2]) > 0.5
     tiles = search.global_tiles(new, drifted)
-    found = [search.match(a, new, drifted, (0.0, 0.0), kind=GLOBAL) for a in tiles]
-    assert all(c.kind == GLOBAL and np.allclose(c.window, [4.0, 4.0, np.pi]) for c in found)
+    found = [search.match(a, new, drifted, (0.0, 0.0), kind=LoopKind.GLOBAL) for a in tiles]
+    assert all(c.kind == LoopKind.GLOBAL and np.allclose(c.window, [4.0, 4.0, np.pi]) for c in found)
     best = max((c for c in found if c.T_old_new is not None), key=lambda c: c.score)
     err = se2_between(se2_between(poses[best.old], poses[new]), best.T_old_new)
     assert best.score >= 0.6 and np.hypot(err[0], err[1]) < 0.05 and abs(err[2]) < 0.02, (best.score, err)
@@ -124,11 +122,11 @@ def test_a_global_match_in_a_corridor_is_a_look_alike(junction: bool) -> None:
     """A plain corridor matches all along itself (and turned around): the global search refuses it; at a
     junction the place is found."""
     search, poses = _corridor_search(junction)
-    cand = search.match(10, 30, poses, (0.0, 0.0), kind=GLOBAL)
+    cand = search.match(10, 30, poses, (0.0, 0.0), kind=LoopKind.GLOBAL)
     if not junction:
-        assert cand.status == LOOK_ALIKE and cand.T_old_new is None
+        assert cand.status == LoopOutcome.LOOK_ALIKE and cand.T_old_new is None
     else:
-        assert cand.status != LOOK_ALIKE and cand.T_old_new is not None
+        assert cand.status != LoopOutcome.LOOK_ALIKE and cand.T_old_new is not None
         assert np.hypot(*cand.T_old_new[:2]) < 0.05 and abs(cand.T_old_new[2]) < 0.01
 
 
@@ -142,9 +140,9 @@ def test_a_wide_local_window_that_holds_a_look_alike_is_refused(junction: bool) 
     assert wide.window[0] >= search.options.wide_window_m
     assert wide.look_alike is (not junction)
     if junction:  # the junction makes the place unique
-        assert wide.T_old_new is not None and wide.status != LOOK_ALIKE
+        assert wide.T_old_new is not None and wide.status != LoopOutcome.LOOK_ALIKE
     else:
-        assert wide.T_old_new is None and wide.status == LOOK_ALIKE
+        assert wide.T_old_new is None and wide.status == LoopOutcome.LOOK_ALIKE
     narrow = search.match(10, 30, poses, (0.1, 0.03))
     assert narrow.window[0] < search.options.wide_window_m
     assert narrow.T_old_new is not None and narrow.look_alike is None
@@ -165,9 +163,9 @@ def test_only_the_one_good_place_of_a_wide_window_is_followed_up() -> None:
     look_alike = _cand(5, 25, same, same, (0.9, 0.2))
     look_alike.look_alike = True
     follow_up = _cand(4, 24, same, same, (0.6, 0.1))
-    follow_up.kind = FOLLOW_UP
+    follow_up.kind = LoopKind.FOLLOW_UP
     for c in (local, narrow, look_alike, follow_up):
-        assert check.review(c, poses) == [] and c.status == PENDING
+        assert check.review(c, poses) == [] and c.status == LoopOutcome.PENDING
     assert check.to_follow_up() == [local]
 
 
@@ -210,10 +208,10 @@ def test_a_room_of_the_same_shape_furnished_otherwise_is_not_the_place() -> None
         cand = search.match(3, 24, poses, (0.1, 0.03))
         assert cand.score >= search.options.min_score
         if refused:
-            assert cand.status == SEES_THROUGH and cand.T_old_new is None
+            assert cand.status == LoopOutcome.SEES_THROUGH and cand.T_old_new is None
         else:
             err = se2_between(se2_between(poses[3], poses[24]), cand.T_old_new)
-            assert cand.status != SEES_THROUGH and np.hypot(err[0], err[1]) < 0.05 and abs(err[2]) < 0.02
+            assert cand.status != LoopOutcome.SEES_THROUGH and np.hypot(err[0], err[1]) < 0.05 and abs(err[2]) < 0.02
 
 
 def _cand(old: int, new: int, T: np.ndarray, guess: np.ndarray, sigma: tuple[float, float]) -> LoopCandidate:
@@ -234,22 +232,22 @@ def test_consistency_check() -> None:
     check = ConsistencyCheck(LoopOptions(), path)
     same = np.zeros(3)
     sure = _cand(2, 22, same, same, (0.05, 0.01))
-    assert check.review(sure, poses) == [sure] and sure.status == ACCEPTED
+    assert check.review(sure, poses) == [sure] and sure.status == LoopOutcome.ACCEPTED
     off = _cand(3, 23, np.array([1.0, 0.0, 0.0]), same, (0.05, 0.01))  # 1 m off a sure estimate
-    assert check.review(off, poses) == [] and off.status == INCONSISTENT
+    assert check.review(off, poses) == [] and off.status == LoopOutcome.INCONSISTENT
     # unsure estimate: one match waits, a second consistent one from another keyframe confirms both
     check = ConsistencyCheck(LoopOptions(), path)
     first = _cand(4, 24, same, same, (0.6, 0.1))
-    assert check.review(first, poses) == [] and first.status == PENDING
+    assert check.review(first, poses) == [] and first.status == LoopOutcome.PENDING
     aliased = _cand(5, 25, np.array([0.9, 0.0, 0.0]), same, (0.6, 0.1))  # a look-alike 0.9 m further on
-    assert check.review(aliased, poses) == [] and aliased.status == PENDING
+    assert check.review(aliased, poses) == [] and aliased.status == LoopOutcome.PENDING
     # a match whose new map shares keyframes with the first's (new_map_keyframes = 4) repeats the same evidence
     overlapping = _cand(6, 26, same, same, (0.6, 0.1))
-    assert check.review(overlapping, poses) == [] and overlapping.status == PENDING
+    assert check.review(overlapping, poses) == [] and overlapping.status == LoopOutcome.PENDING
     second = _cand(9, 29, same, same, (0.6, 0.1))  # its new map (25..29) shares none with the first's (20..24)
     assert set(map(id, check.review(second, poses))) == {id(second), id(first)}
-    assert aliased.status == PENDING and check.expire(newest=50) == [aliased, overlapping]
-    assert aliased.status == UNCONFIRMED
+    assert aliased.status == LoopOutcome.PENDING and check.expire(newest=50) == [aliased, overlapping]
+    assert aliased.status == LoopOutcome.UNCONFIRMED
 
 
 def test_a_global_match_is_gated_loosely_by_the_drift_model_and_needs_a_follow_up() -> None:
@@ -262,21 +260,21 @@ def test_a_global_match_is_gated_loosely_by_the_drift_model_and_needs_a_follow_u
     same = np.zeros(3)
     # after a short stretch of path (drift model: 0.3 m, 0.1 rad) 8.5 m and 40 degrees is a look-alike, not drift
     near = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (0.3, 0.1), same, np.eye(3) * 1e-4, 0.8,
-                         kind=GLOBAL)
-    assert check.review(near, poses) == [] and near.status == INCONSISTENT
+                         kind=LoopKind.GLOBAL)
+    assert check.review(near, poses) == [] and near.status == LoopOutcome.INCONSISTENT
     # after a long loop (drift model: 3 m, 0.5 rad) it is a correction within 5 sigmas
     found = LoopCandidate(2, 22, same, np.array([4.0, 4.0, np.pi]), (3.0, 0.5), same, np.eye(3) * 1e-4, 0.8,
-                          kind=GLOBAL, look_alike=False)
-    assert check.review(found, poses) == [] and found.status == PENDING and check.to_follow_up() == [found]
+                          kind=LoopKind.GLOBAL, look_alike=False)
+    assert check.review(found, poses) == [] and found.status == LoopOutcome.PENDING and check.to_follow_up() == [found]
     # a sure local match elsewhere does not confirm it; a follow-up where it puts keyframe 28 does
     wrong = LoopCandidate(2, 28, same, np.array([0.3, 0.3, 0.1]), (0.05, 0.01), np.array([1.5, 0.0, 0.0]),
-                          np.eye(3) * 1e-4, 0.8, kind=FOLLOW_UP)
-    assert check.review(wrong, poses) == [] and found.status == PENDING
+                          np.eye(3) * 1e-4, 0.8, kind=LoopKind.FOLLOW_UP)
+    assert check.review(wrong, poses) == [] and found.status == LoopOutcome.PENDING
     guess = se2_compose(found.T_old_new, se2_between(poses[22], poses[28]))
     follow = LoopCandidate(2, 28, guess, np.array([0.3, 0.3, 0.1]), (0.2, 0.06), guess, np.eye(3) * 1e-4, 0.8,
-                           kind=FOLLOW_UP)
+                           kind=LoopKind.FOLLOW_UP)
     assert set(map(id, check.review(follow, poses))) == {id(found), id(follow)}
-    assert found.status == ACCEPTED and not check.to_follow_up()
+    assert found.status == LoopOutcome.ACCEPTED and not check.to_follow_up()
 
 
 def test_a_loop_is_supported_by_a_consistent_loop_from_other_scans() -> None:
@@ -305,7 +303,7 @@ def test_a_follow_up_does_not_support_its_own_match_against_the_graph() -> None:
     same = np.zeros(3)
     match = _cand(2, 22, same, same, (0.6, 0.1))
     follow = _cand(2, 28, same, same, (0.2, 0.05))
-    follow.kind, follow.follows = FOLLOW_UP, match
+    follow.kind, follow.follows = LoopKind.FOLLOW_UP, match
     check.accepted += [match, follow]
     assert not check.supported(match, poses) and not check.supported(follow, poses)
     independent = _cand(8, 28, same, same, (0.6, 0.1))  # searched on its own from the same scans as the follow-up

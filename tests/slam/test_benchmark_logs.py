@@ -14,7 +14,7 @@ import pytest
 
 from bagtools.io.carmen import write_flaser_log
 from bagtools.commands.slam import SlamOptions, SlamPipeline
-from bagtools.pose_graph.loops import ACCEPTED, FOLLOW_UP, SEES_THROUGH
+from bagtools.pose_graph.loops import LoopKind, LoopOutcome
 from tests.conftest import REPO, ros1_scan_slice
 
 BENCHMARK_DIR = REPO.parent / "shared" / "data" / "benchmark"
@@ -86,7 +86,7 @@ def test_a_place_that_only_looks_like_an_old_one_closes_no_loop(fr079_second_hal
     whole log's slam scores 0.0317 m on these relations)."""
     options = SlamOptions(relations=str(BENCHMARK_DIR / "fr079.relations"))
     summary = SlamPipeline(fr079_second_half, options).run().summary
-    assert summary["loop_closure"]["rejected_by_reason"].get(SEES_THROUGH, 0) >= 1, summary["loop_closure"]
+    assert summary["loop_closure"]["rejected_by_reason"].get(LoopOutcome.SEES_THROUGH, 0) >= 1, summary["loop_closure"]
     scored = summary["relations"]["slam"]
     assert scored["used"] > 700
     assert scored["trans_mean_m"] < 0.035 and scored["trans_max_m"] < 0.3, scored
@@ -100,8 +100,8 @@ def test_a_match_waiting_when_the_log_ends_is_followed_up_at_the_keyframes_befor
     options = SlamOptions(use_odometry=False, relations=str(BENCHMARK_DIR / "fr079.relations"))
     result = SlamPipeline(fr079_second_half, options).run()
     last = len(result.back_end.keyframe_steps) - 1
-    confirmed = [c for c in result.back_end.candidates if c.kind == FOLLOW_UP and c.status == ACCEPTED
-                 and c.follows is not None and c.new < c.follows.new]
+    confirmed = [c for c in result.back_end.candidates if c.kind == LoopKind.FOLLOW_UP
+                 and c.status == LoopOutcome.ACCEPTED and c.follows is not None and c.new < c.follows.new]
     assert confirmed and max(c.follows.new for c in confirmed) > last - 5, [(c.old, c.new) for c in confirmed]
     scored = result.summary["relations"]["slam"]
     assert scored["trans_mean_m"] < 0.036 and scored["trans_max_m"] < 0.3, scored

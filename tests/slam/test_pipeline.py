@@ -19,7 +19,7 @@ from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph import build_pose_graph
 from bagtools.commands.slam import SLAM_FILES, SlamOptions, SlamPipeline, SlamResult, write_slam
 from bagtools.trajectory.evaluate import align_se2
-from bagtools.pose_graph.loops import ACCEPTED
+from bagtools.pose_graph.loops import LoopOutcome
 from bagtools.trajectory import read_tum
 from bagtools.transforms import pose2tform, se2_between
 from tests.conftest import FIXTURES, make_scan, write_bag
@@ -120,7 +120,7 @@ def test_real_csail_log_loops_are_right(csail_odom: Path) -> None:
 
     before, after = aligned_rmse(front.poses()[back.keyframe_steps]), aligned_rmse(back.graph.poses)
     assert before > 2.0 and after < 0.3, (before, after)
-    accepted = [c for c in back.candidates if c.status == ACCEPTED]
+    accepted = [c for c in back.candidates if c.status == LoopOutcome.ACCEPTED]
     assert len(accepted) >= 100
     errors = [np.hypot(*se2_between(se2_between(truth[c.old], truth[c.new]), c.T_old_new)[:2]) for c in accepted]
     # no look-alike (a corridor's aliases lie a metre and more away); most within a few centimetres

@@ -52,7 +52,7 @@ from bagtools.odometry.options import NdtOdomOptions
 from bagtools.odometry.pipeline import NdtOdomResult, run_front_end
 from bagtools.odometry.steps import FrontEndRun
 from bagtools.pose_graph.backend import BackEndOptions, BackEndResult, build_pose_graph
-from bagtools.pose_graph.loops import ACCEPTED, LoopOptions
+from bagtools.pose_graph.loops import LoopOptions, LoopOutcome
 from bagtools.trajectory import Relations, Trajectory, read_relations, relation_errors
 from bagtools.trajectory.evaluate import trajectory_errors
 from bagtools.transforms import pose2tform, se2_between, se2_compose, wrap_to_pi
@@ -302,7 +302,7 @@ class SlamPipeline:
         }
 
     def _loop_segments(self, back: BackEndResult) -> np.ndarray:
-        pairs = [(c.old, c.new) for c in back.candidates if c.status == ACCEPTED]
+        pairs = [(c.old, c.new) for c in back.candidates if c.status == LoopOutcome.ACCEPTED]
         poses = back.graph.poses
         return np.array([[poses[a, :2], poses[b, :2]] for a, b in pairs]).reshape(-1, 2, 2)
 
@@ -319,10 +319,10 @@ class SlamPipeline:
         front_summary = {k: v for k, v in result.summary.items()
                          if k not in ("bag", "topic", "options", "warnings", "evaluation") and not k.startswith("errors_")}
         statuses = Counter(c.status for c in back.candidates)
-        accepted = statuses.pop(ACCEPTED, 0)
+        accepted = statuses.pop(LoopOutcome.ACCEPTED, 0)
         graph = back.graph
         opt = back.optimizations
-        loops = [c for c in back.candidates if c.status == ACCEPTED]
+        loops = [c for c in back.candidates if c.status == LoopOutcome.ACCEPTED]
         summary: dict = {
             "bag": str(self.bag_path),
             "topic": self.options.topic,
