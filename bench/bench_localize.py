@@ -227,7 +227,7 @@ def _start_rows(name: str, nav2, inputs, odom: np.ndarray, truth: np.ndarray, tw
     its 180-degree ``twin`` (N, 3) in the map's frame): fixed within 2 s at the place (5 cm), still alike at 2 s
     with the place among the hypotheses, fixed wrong; and the starts the twin explains as well."""
     from bagtools.commands.localize import MapLocalizer
-    from bagtools.commands.localize.settings import CONFIRM_MARGIN, TRACKING
+    from bagtools.commands.localize.settings import CONFIRM_MARGIN, TrackState
 
     points = nav2.occupied_points()
     starts = np.random.default_rng(11).choice(len(odom) - 20, size=n_starts, replace=False)
@@ -243,7 +243,7 @@ def _start_rows(name: str, nav2, inputs, odom: np.ndarray, truth: np.ndarray, tw
             if step == 0 and localizer.hypotheses:
                 first_right += bool(np.hypot(*(localizer.hypotheses[0].pose[:2] - truth[k, :2])) < 0.05)
             at_place = [bool(np.hypot(*(h.pose[:2] - truth[k, :2])) < 0.05) for h in localizer.hypotheses]
-            if state == TRACKING:
+            if state == TrackState.TRACKING:
                 right = bool(np.hypot(*(localizer.poses[step][:2] - truth[k, :2])) < 0.05)
                 fixed += right and inputs.stamps_ns[k] <= deadline
                 wrong += not right

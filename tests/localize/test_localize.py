@@ -17,7 +17,7 @@ from bagtools.commands.grid import GridMapOptions, GridMapPipeline
 from bagtools.io import open_bag
 from bagtools.commands.localize import LocalizeOptions, LocalizePipeline, MapLocalizer
 from bagtools.commands.localize import tracker
-from bagtools.commands.localize.settings import AMBIGUOUS, CONFIRMING, TRACKING, UNMAPPED
+from bagtools.commands.localize.settings import TrackState
 from bagtools.transforms import se2_between, se2_compose
 from bagtools_simulate.pipeline import SimConfig, simulate_bag
 from bagtools_simulate.world import World
@@ -70,12 +70,12 @@ def test_random_starts_are_fixed_within_two_seconds_or_said_alike_never_fixed_wr
         for step, k in enumerate(range(start, len(odom))):
             state = localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
             in_time = (inputs.stamps_ns[k] - inputs.stamps_ns[start]) * 1e-9 <= 2.0
-            if state == TRACKING:
+            if state == TrackState.TRACKING:
                 assert np.hypot(*(localizer.poses[step][:2] - truth[k, :2])) < 0.05, (start, step)  # never wrong
                 fixed += in_time
                 break
             if in_time and (inputs.stamps_ns[k + 1] - inputs.stamps_ns[start]) * 1e-9 > 2.0:
-                alike += state == AMBIGUOUS and any(np.hypot(*(h.pose[:2] - truth[k, :2])) < 0.05
+                alike += state == TrackState.AMBIGUOUS and any(np.hypot(*(h.pose[:2] - truth[k, :2])) < 0.05
                                                     for h in localizer.hypotheses)
     assert fixed + alike == len(starts) and fixed >= 10, (fixed, alike)
 
@@ -109,7 +109,7 @@ def test_a_map_that_repeats_itself_stays_ambiguous_until_the_scans_tell_the_plac
     for k in range(15):
         pose = np.array([1.0 + 0.1 * k, 0.5, 0.3])
         states.append(localizer.step(k, k * 200_000_000, _room_scan(pose, half), pose))
-    assert localizer.committed is None and states[-1] == AMBIGUOUS and CONFIRMING in states
+    assert localizer.committed is None and states[-1] == TrackState.AMBIGUOUS and TrackState.CONFIRMING in states
     assert len(localizer.hypotheses) == 2
 
 
@@ -299,7 +299,7 @@ def test_a_robot_off_the_map_is_carried_by_its_motion_not_lost(world: dict) -> N
     localizer = _localizer_without_the_top_third(world)
     states = [localizer.step(step, int(inputs.stamps_ns[k]), inputs.points_base(k), odom[k])
               for step, k in enumerate(inputs.order)]
-    assert UNMAPPED in states and [e.kind for e in localizer.events] == ["fix"]
+    assert TrackState.UNMAPPED in states and [e.kind for e in localizer.events] == ["fix"]
     errors = [np.hypot(*(localizer.poses[s][:2] - truth[k][:2])) for s, k in enumerate(inputs.order)
               if s in localizer.poses]
     assert len(errors) >= len(states) - 5 and max(errors) < 0.15, max(errors)
@@ -521,7 +521,7 @@ def test_a_robot_carried_off_the_map_is_searched_only_for_what_it_would_take(wor
         return localizer
 
     (floored, work), (unfloored, all_work) = _with_and_without_floors(run, monkeypatch, tracker.WINDOW)
-    assert UNMAPPED in floored.states
+    assert TrackState.UNMAPPED in floored.states
     assert floored.poses.keys() == unfloored.poses.keys() and floored.states == unfloored.states
     assert all(np.allclose(floored.poses[s], unfloored.poses[s], atol=1e-9) for s in floored.poses)
     assert work < all_work, (work, all_work)
@@ -542,13 +542,13 @@ def test_a_robot_standing_still_off_the_map_is_not_searched_for_again_and_again(
         stamp = int(inputs.stamps_ns[k])
         states.append(localizer.step(step, stamp, inputs.points_base(k), odom[k], continuous=step > 0))
         step += 1
-        if states[-5:] == [UNMAPPED] * 5:
+        if states[-5:] == [TrackState.UNMAPPED] * 5:
             break
-    assert states[-1] == UNMAPPED and localizer.committed is not None
+    assert states[-1] == TrackState.UNMAPPED and localizer.committed is not None
     before, pose = len(searches), localizer.committed.pose.copy()
     for _ in range(60):  # standing still where the map knows nothing
         stamp += 100_000_000
-        assert localizer.step(step, stamp, inputs.points_base(k), odom[k], continuous=True) == UNMAPPED
+        assert localizer.step(step, stamp, inputs.points_base(k), odom[k], continuous=True) == TrackState.UNMAPPED
         step += 1
     assert len(searches) - before <= 2, len(searches) - before  # without: 24 (a search every fifth scan, 2 windows)
     assert np.allclose(localizer.committed.pose, pose)

@@ -32,7 +32,7 @@ from bagtools.grid import Nav2Map, read_nav2_map
 from bagtools.io import BagReader, open_bag
 from bagtools.commands.localize.smoother import map_offset, revisit_factors, smooth_track
 from bagtools.commands.localize.hypotheses import Event
-from bagtools.commands.localize.settings import AMBIGUOUS, CONFIRM_SCANS, CONFIRMING, LOST, SEARCHING, TRACKING, UNMAPPED
+from bagtools.commands.localize.settings import CONFIRM_SCANS, TrackState
 from bagtools.commands.localize.tracker import MapLocalizer
 from bagtools.odometry.options import NdtOdomOptions
 from bagtools.dataset import LaserDataset, ScanInputs
@@ -279,8 +279,7 @@ class LocalizePipeline:
         stamps = result.stamps_ns
         duration_s = max((int(stamps[-1]) - int(stamps[0])) * 1e-9, 1e-9)
         fixes = [e for e in result.events if e.kind == "fix"]
-        counts = {state: int(np.count_nonzero(result.states == state))
-                  for state in (SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, UNMAPPED, LOST)}
+        counts = {state: int(np.count_nonzero(result.states == state)) for state in TrackState}
         summary: dict = {
             "bag": str(self.bag_path),
             "map": str(self.map_yaml),
@@ -313,12 +312,13 @@ class LocalizePipeline:
         localized = result.scores[np.isfinite(result.poses).all(axis=1)]
         if localized.size:
             summary["score"] = ErrorStats.of(localized).as_dict()
-        if counts[AMBIGUOUS]:
-            self.warnings.append(f"{counts[AMBIGUOUS]} scan(s) matched several places of the map alike for longer "
-                                 f"than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats itself)")
-        if counts[UNMAPPED]:
-            self.warnings.append(f"{counts[UNMAPPED]} scan(s) saw what the map does not have there (off the map, or "
-                                 "a part it saw only from afar): their poses are carried by the laser odometry")
+        if counts[TrackState.AMBIGUOUS]:
+            self.warnings.append(f"{counts[TrackState.AMBIGUOUS]} scan(s) matched several places of the map alike for "
+                                 f"longer than the {CONFIRM_SCANS} scans a fix is confirmed over (a map that repeats "
+                                 "itself)")
+        if counts[TrackState.UNMAPPED]:
+            self.warnings.append(f"{counts[TrackState.UNMAPPED]} scan(s) saw what the map does not have there (off the "
+                                 "map, or a part it saw only from afar): their poses are carried by the laser odometry")
         if summary["lost"]:
             losses = [e for e in result.events if e.kind == "lost"]
             places = "; ".join(f"{e.stamp_ns * 1e-9:.2f} s at ({e.pose[0]:.2f}, {e.pose[1]:.2f})" for e in losses[:3])
@@ -400,11 +400,11 @@ def _tracking_speed(duration_s: float, counts: dict[str, int], timing_s: dict) -
     duration over the localizer's seconds on them plus their share of the laser odometry's and the smoothing's
     (shares by scan count). The time spent searching, or carrying the robot where the map explains nothing
     (unmapped), is left out: ``speed_x_real_time`` counts everything."""
-    scans, tracked = sum(counts.values()), counts.get(TRACKING, 0)
+    scans, tracked = sum(counts.values()), counts.get(TrackState.TRACKING, 0)
     if not tracked or not timing_s:
         return None
     share = tracked / scans
-    spent = timing_s["localizer_by_state"].get(TRACKING, 0.0) + share * (timing_s["laser_odometry"]
+    spent = timing_s["localizer_by_state"].get(TrackState.TRACKING, 0.0) + share * (timing_s["laser_odometry"]
                                                                         + timing_s["smoothing"])
     return share * duration_s / max(spent, 1e-9)
 

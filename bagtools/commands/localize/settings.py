@@ -5,6 +5,7 @@ the states a scan is in. ``docs/commands/localize.md`` ("The tracker, step by st
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 
 #: A hypothesis is committed after matching this many scans (its search's scan included)...
 CONFIRM_SCANS = 5
@@ -63,5 +64,13 @@ NDT_CELL_M = 0.5
 MAX_HYPOTHESES = 4
 SEARCH_EVERY_SCANS = 5
 
-SEARCHING, CONFIRMING, AMBIGUOUS, TRACKING, UNMAPPED, LOST = (
-    "searching", "confirming", "ambiguous", "tracking", "unmapped", "lost")
+
+class TrackState(StrEnum):
+    """The tracker's state at a scan (summary.json counts scans by these words)."""
+
+    SEARCHING = "searching"
+    CONFIRMING = "confirming"
+    AMBIGUOUS = "ambiguous"
+    TRACKING = "tracking"
+    UNMAPPED = "unmapped"
+    LOST = "lost"

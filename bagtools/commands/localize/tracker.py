@@ -23,11 +23,10 @@ import numpy as np
 from bagtools.commands.localize.global_search import SEPARATION, GlobalLocalizer
 from bagtools.commands.localize.hypotheses import Bound, Event, Fit, Hypothesis, RecentScores
 from bagtools.commands.localize.settings import (  # the tracker's fixed settings
-    AMBIGUOUS, CHECK_MARGIN, CHECK_RATIO, CONFIRMING, CONFIRM_MARGIN, CONFIRM_SCANS, CONSTRAINED_RATIO,
-    DIVERGED_SCORE, FIX_SCORE, LOCAL_WINDOW, LOST, LOST_RATIO, LOST_SCANS, MAPPED_SHARE, MAX_ANGULAR_STEP,
-    MAX_HYPOTHESES, MIN_SCORE, NDT_CELL_M, NDT_JUMP, RECOVER_RATIO, SCAN_MATCHED_NOISE_M, SEARCHING,
-    SEARCH_EVERY_SCANS, SWITCH_MARGIN, THROUGH_BEAMS, THROUGH_RANGE_M, THROUGH_TOLERANCE_M, TRACKING, TYPICAL_SCANS,
-    UNMAPPED, USUAL_SCANS, WINDOW,
+    CHECK_MARGIN, CHECK_RATIO, CONFIRM_MARGIN, CONFIRM_SCANS, CONSTRAINED_RATIO, DIVERGED_SCORE, FIX_SCORE,
+    LOCAL_WINDOW, LOST_RATIO, LOST_SCANS, MAPPED_SHARE, MAX_ANGULAR_STEP, MAX_HYPOTHESES, MIN_SCORE, NDT_CELL_M,
+    NDT_JUMP, RECOVER_RATIO, SCAN_MATCHED_NOISE_M, SEARCH_EVERY_SCANS, SWITCH_MARGIN, THROUGH_BEAMS, THROUGH_RANGE_M,
+    THROUGH_TOLERANCE_M, TYPICAL_SCANS, USUAL_SCANS, WINDOW, TrackState,
 )
 from bagtools.scan_matching import GridMatchResult, NdtReference, match_scans, match_scans_grid
 from bagtools.scan_matching.window_search import RASTER_MAX
@@ -108,7 +107,7 @@ class MapLocalizer:
             if h.misses == 0 and not h.coasting:
                 self.typical.append(score)
                 self.usual.append(score)
-            return UNMAPPED if h.coasting else TRACKING
+            return TrackState.UNMAPPED if h.coasting else TrackState.TRACKING
         last_good = max(k for k in h.poses if k not in self._recent_misses(h, index))
         self.events.append(Event("lost", index, stamp_ns, h.poses[last_good]))
         for k in range(index - LOST_SCANS + 1, index + 1):  # the poorly matched scans are not trusted
@@ -119,7 +118,7 @@ class MapLocalizer:
         self._typical_before_loss = self._typical()
         self._lost_since = index
         self._next_search = index + 1
-        return LOST
+        return TrackState.LOST
 
     def _recent_misses(self, h: Hypothesis, index: int) -> set[int]:
         return set(range(index - h.misses + 1, index + 1))
@@ -127,20 +126,21 @@ class MapLocalizer:
     def _confirm(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> str:
         if not self.hypotheses:
             if index < self._next_search:
-                return LOST if self._lost_since is not None else SEARCHING
+                return TrackState.LOST if self._lost_since is not None else TrackState.SEARCHING
             self._start(index, stamp_ns, points, odom)
             if not self.hypotheses:
                 self._next_search = index + SEARCH_EVERY_SCANS
-                return LOST if self._lost_since is not None else SEARCHING
+                return TrackState.LOST if self._lost_since is not None else TrackState.SEARCHING
         else:
             for h in self.hypotheses:
                 self._follow(h, index, stamp_ns, points, odom)
             self.hypotheses = self._distinct([h for h in self.hypotheses if h.misses < LOST_SCANS])
         if self.hypotheses and self._decide(index, stamp_ns):
-            return TRACKING
+            return TrackState.TRACKING
         if self.hypotheses:
-            return AMBIGUOUS if max(len(h.scores) for h in self.hypotheses) >= CONFIRM_SCANS else CONFIRMING
-        return LOST if self._lost_since is not None else SEARCHING
+            confirmed = max(len(h.scores) for h in self.hypotheses) >= CONFIRM_SCANS
+            return TrackState.AMBIGUOUS if confirmed else TrackState.CONFIRMING
+        return TrackState.LOST if self._lost_since is not None else TrackState.SEARCHING
 
     def _start(self, index: int, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> None:
         """New hypotheses for scan ``index``: the initial pose's window, or the global search."""
