@@ -82,3 +82,22 @@ def test_a_cloud_tf_misplaces_is_registered_back_onto_the_map(coloured: bool) ->
     pose = refiner.refine(points, moved, rgb)
     assert refiner.registered == 1 and np.linalg.norm(pose[:3, 3]) < 0.005, pose[:3, 3]
     assert np.allclose(refiner.correction[:3, 3], -moved[:3, 3], atol=0.005)
+
+
+def test_the_map_finds_a_clouds_reach_in_its_cubes_as_a_full_scan_would() -> None:
+    """The map's points within a box come from the cubes around it (a cloud's cost does not grow with the map),
+    in map order: the same rows a scan of every point finds, for a box inside the map and one far larger."""
+    from bagtools.commands.map_cloud.refine import CloudRefiner
+
+    refiner = CloudRefiner()
+    rng = np.random.default_rng(1)
+    for k in range(30):  # clouds along a 15 m corridor, each added where the map holds no point yet
+        cloud = np.c_[rng.uniform(0, 1.5, 300) + 0.5 * k, rng.uniform(-1.5, 1.5, 300), rng.uniform(0, 2, 300)]
+        refiner._add(refiner._cloud(cloud, None), np.eye(4))
+    points = refiner.points
+    for lo, hi in (([3.2, -0.4, 0.1], [5.9, 1.1, 1.3]), ([-50.0, -50.0, -50.0], [80.0, 50.0, 50.0])):
+        lo, hi = np.array(lo), np.array(hi)
+        rows = refiner._rows_near(lo, hi)
+        rows = rows[np.all((points[rows] >= lo) & (points[rows] <= hi), axis=1)]
+        np.testing.assert_array_equal(rows, np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1)))
+    assert len(refiner.normals) == len(points) > 1000 and refiner.colors is None
