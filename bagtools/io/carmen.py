@@ -11,8 +11,8 @@ What each line becomes (messages in the ROS 1 types, so that ``header.seq`` says
 - The front laser's mount -> ``/tf_static`` (base_link -> laser, and base_link -> rear_laser turned by pi):
   ``ROBOTLASER1``'s laser pose against its robot pose (the first line's), else ``PARAM robot_frontlaser_offset``
   (metres ahead of the base), else none.
-- Stamps are each line's ``ipc_timestamp``, exact to the nanosecond (parsed as decimal text, never a float):
-  the benchmarks' ``.relations`` files use them.
+- Stamps are each line's ``ipc_timestamp``, exact to the nanosecond (parsed as decimal text, never a float, in
+  C's %g form too: "1.10002e+09"): the benchmarks' ``.relations`` files use them.
 
 Beam angles. ``ROBOTLASER``/``RAWLASER`` lines carry start angle, field of view and angular resolution, used as
 they say. ``FLASER``/``RLASER`` lines carry only the beam count: the beams span the field of view (180 degrees, 100
@@ -110,12 +110,20 @@ def looks_like_carmen(path: Path) -> bool:
 
 
 def stamp_text_to_ns(text: str) -> int:
-    """A decimal seconds string ("1234.567890") as int nanoseconds, exactly (no float on the way)."""
-    whole, _, frac = text.strip().partition(".")
-    if not whole.lstrip("-").isdigit() or (frac and not frac.isdigit()):
+    """A decimal seconds string as int nanoseconds, exactly (no float on the way), nanoseconds beyond the ninth
+    digit cut: "1234.567890", or in C's %g form, as a logger that wrote six significant digits did ("1.10002e+09":
+    every stamp of such a log may come out equal, which the dataset's clock then says)."""
+    text = text.strip()
+    mantissa, e, exponent = text.replace("E", "e").partition("e")
+    whole, _, frac = mantissa.partition(".")
+    if not whole.lstrip("-").isdigit() or (frac and not frac.isdigit()) or \
+            (e and not (exponent.lstrip("+-").isdigit() and len(exponent.lstrip("+-")) <= 2)):
         raise ValueError(f"not a timestamp: {text!r}")
-    sign = -1 if whole.startswith("-") else 1
-    return sign * (abs(int(whole)) * 1_000_000_000 + int((frac + "000000000")[:9] or 0))
+    shift = 9 + (int(exponent) if e else 0)  # nanoseconds: the decimal point moved right by this many digits
+    digits = whole.lstrip("-") + frac
+    point = len(whole.lstrip("-")) + shift  # where the point falls in ``digits``
+    ns = int((digits + "0" * max(point - len(digits), 0))[:max(point, 0)] or 0)
+    return -ns if whole.startswith("-") else ns
 
 
 @dataclass(frozen=True)

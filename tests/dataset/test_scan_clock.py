@@ -39,6 +39,10 @@ def _log_with_stamps(tmp_path: Path, stamp_of) -> tuple[Path, int]:
 @pytest.mark.parametrize("stamp_of,why", [
     (lambda k: "0.000000", "every stamp is 0.000000000 s"),
     (lambda k: "1234.567890", "every stamp is 1234.567890000 s"),
+    # six significant digits (C's %g) of a clock near 1.1e9 s: all equal, written in exponent form
+    (lambda k: f"{1.1e9 + 0.2 * k:.6g}", "every stamp is 1100000000.000000000 s"),
+    # the same clock where it crosses one of those digits' steps: equal but for one step
+    (lambda k: f"{1.1e9 + 4995 + 0.2 * k:.6g}", "99 of 100 stamps are not after the one before"),
 ])
 def test_unusable_stamps_are_replaced_by_logging_order(tmp_path: Path, stamp_of, why: str) -> None:
     log, n = _log_with_stamps(tmp_path, stamp_of)

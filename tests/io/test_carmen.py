@@ -39,8 +39,18 @@ def write(path: Path, lines: list[str]) -> Path:
 def test_stamps_are_exact_nanoseconds() -> None:
     assert stamp_text_to_ns("976052857.337530") == 976052857_337530000
     assert stamp_text_to_ns("12.5") == 12_500_000_000 and stamp_text_to_ns("7") == 7_000_000_000
-    with pytest.raises(ValueError):
-        stamp_text_to_ns("12.3e4")
+    assert stamp_text_to_ns("1.0123456789") == 1_012_345_678  # beyond the nanosecond: cut, as ever
+
+
+def test_stamps_written_by_printf_g_are_read_exactly() -> None:
+    """A logger that wrote six significant digits (C's %g) writes a 1e9 s stamp as "1.10002e+09": read, exactly;
+    what is not a number in either form is refused."""
+    assert stamp_text_to_ns("1.10002e+09") == 1_100_020_000 * 10**9
+    assert stamp_text_to_ns("1.1E+09") == 1_100_000_000 * 10**9
+    assert stamp_text_to_ns("12.3e4") == 123_000 * 10**9 and stamp_text_to_ns("1.5e-05") == 15_000
+    for text in ("1e", "e5", "nan", "inf", "1_0", "1.2.3", "1e999", "0x10", "+1"):
+        with pytest.raises(ValueError):
+            stamp_text_to_ns(text)
 
 
 def test_flaser_beams_span_the_field_of_view() -> None:
