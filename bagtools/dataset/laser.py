@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bagtools.dataset.scans import ScanClock, ScanStream, recording_order, require_topic, scan_clock, stamped_late
+from bagtools.dataset.scans import (
+    MAX_REORDER_SCANS, ScanClock, ScanStream, recording_order, require_topic, scan_clock, stamped_late,
+)
 from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry,
@@ -94,12 +96,15 @@ class LaserDataset:
         self.reordered = 0
         self.repeated = 0
         self.stamps_ignored: str | None = None  # why the scans' stamps were ignored (logging order instead)
+        self._max_shift: int | None = MAX_REORDER_SCANS
 
     def read(self, bag: BagReader) -> ScanInputs:
         """What the front end is fed, read from the open ``bag``: the usable scans, the order to register them in,
         the odometry at their stamps, the laser's mount (see :class:`ScanInputs`). Frames, counts and warnings
         are set on the dataset on the way."""
         require_topic(bag, self.topic, LASERSCAN_TYPES, "LaserScan")
+        # how far header.seq may move a scan from its place in stamp order and still be its recording order
+        self._max_shift = None if bag.seq_is_recording_order else MAX_REORDER_SCANS
         self._load_odometry(bag)
         clock = scan_clock(bag, self.topic)
         self.stamps_ignored = None if clock.usable else clock.why
@@ -231,13 +236,17 @@ class LaserDataset:
         self.skipped = dict(stream.skipped) | dict(far)
         self.warnings.extend(f"{n} scan(s) on {self.topic} skipped: {why}" for why, n in far.items())
         self.warnings.extend(stream.warnings())
+        order = np.argsort(np.asarray(stamps, dtype=np.int64), kind="stable")  # the clock's logging order may
+        if not clock.usable and np.any(np.diff(order) != 1):                    # not be the bag's (by_seq)
+            stamps, points, seqs = [stamps[k] for k in order], [points[k] for k in order], [seqs[k] for k in order]
+            self.scans = [self.scans[k] for k in order] if self.keep_scans else self.scans
         self.seqs = seqs
         return np.asarray(stamps, dtype=np.int64), points
 
     def _order(self, stamps: np.ndarray) -> np.ndarray:
         """The order to register the scans in: their recording order (:func:`~bagtools.dataset.recording_order`)
         when their stamps disagree with it, else the order read."""
-        order = recording_order(stamps, self.seqs)
+        order = recording_order(stamps, self.seqs, self._max_shift)
         if order is None:
             return np.arange(len(stamps))
         moved = int(np.count_nonzero(np.diff(stamps[order]) < 0))  # scans stamped before the one recorded before them
@@ -285,7 +294,7 @@ class LaserDataset:
         if not samples:
             return np.zeros(0, dtype=np.int64)
         stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
-        order = recording_order(stamps, seqs)
+        order = recording_order(stamps, seqs, self._max_shift)
         if order is None:
             return np.zeros(0, dtype=np.int64)
         late = stamps[stamped_late(stamps, order)]

@@ -56,17 +56,20 @@ CHUNK_SCANS = 256
 MAX_REORDER_SCANS = 100
 
 
-def recording_order(stamps_ns: np.ndarray, seqs: list[int | None]) -> np.ndarray | None:
+def recording_order(stamps_ns: np.ndarray, seqs: list[int | None],
+                    max_shift: int | None = MAX_REORDER_SCANS) -> np.ndarray | None:
     """The order the scans were recorded in, when their stamps say otherwise; None when the stamps' order holds.
 
     ``stamps_ns`` (N,) and ``seqs`` (N,): the scans as read (stamp order). ROS 1
     publishers number their messages (``header.seq``) as they send them; when
     every scan has a distinct seq and sorting by it moves no scan more than
-    :data:`MAX_REORDER_SCANS` places, a scan whose seq is out of step with its
-    stamp was stamped with a time earlier (or later) than its neighbours' (the
-    Intel Research Lab log stamps 631 of 13631 scans up to 0.9 s early). Returns
-    the permutation of ``range(N)`` in seq order, or None (no seq, a restart, or
-    nothing out of order).
+    ``max_shift`` (:data:`MAX_REORDER_SCANS`) places, a scan whose seq is out of
+    step with its stamp was stamped with a time earlier (or later) than its
+    neighbours' (the Intel Research Lab log stamps 631 of 13631 scans up to 0.9 s
+    early). ``max_shift`` None: the seq is the recording order however far it
+    moves a scan (a CARMEN log's lines, :attr:`~bagtools.io.BagReader.seq_is_recording_order`:
+    a clock that went back holds no publisher's restart). Returns the permutation of
+    ``range(N)`` in seq order, or None (no seq, a restart, or nothing out of order).
     """
     n = len(seqs)
     if n < 2 or any(s is None for s in seqs):
@@ -75,7 +78,7 @@ def recording_order(stamps_ns: np.ndarray, seqs: list[int | None]) -> np.ndarray
     order = np.argsort(seq, kind="stable")
     if np.all(order == np.arange(n)) or np.unique(seq).size != n:
         return None
-    if np.abs(order - np.arange(n)).max() > MAX_REORDER_SCANS:
+    if max_shift is not None and np.abs(order - np.arange(n)).max() > max_shift:
         return None
     return order
 
@@ -100,14 +103,21 @@ LOGGING_ORDER_STEP_NS = 1_000_000_000
 class ScanClock:
     """How a topic's scans are timed: by their header stamps (``usable``), or, when those say nothing, by their
     logging order: the ``index``-th message of the topic (bag order, counting every message) is stamped
-    ``first_ns + index * LOGGING_ORDER_STEP_NS``. ``why``: what is wrong with the stamps."""
+    ``first_ns + index * LOGGING_ORDER_STEP_NS``, or, when the bag's seq is its recording order (``by_seq``), the
+    message of header.seq ``seq`` is stamped ``first_ns + (seq - first_seq) * LOGGING_ORDER_STEP_NS``. ``why``:
+    what is wrong with the stamps."""
 
     usable: bool = True
     first_ns: int = 0
     why: str = ""
+    by_seq: bool = False
+    first_seq: int = 0
 
-    def stamp_ns(self, index: int, header_ns: int) -> int:
-        return header_ns if self.usable else self.first_ns + index * LOGGING_ORDER_STEP_NS
+    def stamp_ns(self, index: int, header_ns: int, seq: int | None = None) -> int:
+        if self.usable:
+            return header_ns
+        rank = seq - self.first_seq if self.by_seq and seq is not None else index
+        return self.first_ns + rank * LOGGING_ORDER_STEP_NS
 
     def warning(self, topic: str) -> str | None:
         """The one line that says the stamps were ignored (None when they were used)."""
@@ -119,11 +129,20 @@ class ScanClock:
 
 
 def scan_clock(bag: BagReader, topic: str) -> ScanClock:
-    """The clock of ``topic``'s scans (see :class:`ScanClock`), from their header stamps in bag order."""
-    stamps = np.array([rec.msg.stamp_ns if isinstance(rec.msg, LaserScanArrays) else _header_ns(rec.msg)
-                       for rec in bag.messages([topic], from_cdr={topic: laserscan_from_cdr})], dtype=np.int64)
+    """The clock of ``topic``'s scans (see :class:`ScanClock`), from their header stamps in recording order: the
+    bag's order, or header.seq's where the bag says that is the recording order (a CARMEN log, whose reader
+    orders its lines by stamp: a clock that ran backwards would otherwise look right)."""
+    stamps, seqs = [], []
+    for rec in bag.messages([topic], from_cdr={topic: laserscan_from_cdr}):
+        stamps.append(rec.msg.stamp_ns if isinstance(rec.msg, LaserScanArrays) else _header_ns(rec.msg))
+        seqs.append(getattr(getattr(rec.msg, "header", None), "seq", None))
+    stamps = np.array(stamps, dtype=np.int64)
     if stamps.size < 3:
         return ScanClock()
+    by_seq = bag.seq_is_recording_order and None not in seqs and len(set(seqs)) == len(seqs)
+    if by_seq:
+        order = np.argsort(np.array(seqs, dtype=np.int64), kind="stable")
+        stamps, first_seq = stamps[order], int(seqs[order[0]])
     steps = np.diff(stamps)
     stuck = int(np.count_nonzero(steps <= 0))
     if stuck <= UNUSABLE_STAMPS_SHARE * steps.size:
@@ -132,7 +151,7 @@ def scan_clock(bag: BagReader, topic: str) -> ScanClock:
         why = f"every stamp is {stamps[0] / 1e9:.9f} s"
     else:
         why = f"{stuck} of {steps.size} stamps are not after the one before"
-    return ScanClock(False, int(stamps[0]), why)
+    return ScanClock(False, int(stamps[0]), why, by_seq, first_seq if by_seq else 0)
 
 
 def _header_ns(msg: object) -> int:
@@ -212,11 +231,12 @@ class ScanStream:
         except DecodeError as err:
             self.skipped[f"unusable header: {err.problem}"] += 1
             return None
-        if not self.clock.usable:
-            scan = replace(scan, stamp_ns=self.clock.stamp_ns(index, scan.stamp_ns))
+        seq = getattr(getattr(rec.msg, "header", None), "seq", None)  # ROS 1 numbers its messages
+        if not self.clock.usable:  # each its own stamp in logging order: none is skipped as going backwards
+            scan = replace(scan, stamp_ns=self.clock.stamp_ns(index, scan.stamp_ns, seq))
         if scan.notes:
             self.notes.update(scan.notes)
-        if self.increasing and self._last_ns is not None and scan.stamp_ns <= self._last_ns:
+        if self.increasing and self.clock.usable and self._last_ns is not None and scan.stamp_ns <= self._last_ns:
             self.skipped[SKIP_BACKWARDS] += 1
             if self._first_backwards_ns is None:
                 self._first_backwards_ns = scan.stamp_ns
@@ -226,7 +246,6 @@ class ScanStream:
             return None
         self.frame_ids.add(scan.frame_id)
         self._last_ns = scan.stamp_ns
-        seq = getattr(getattr(rec.msg, "header", None), "seq", None)  # ROS 1 numbers its messages
         return ScanMessage(rec.log_time_ns, scan, None if seq is None else int(seq))
 
     def warnings(self) -> list[str]:

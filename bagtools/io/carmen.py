@@ -255,6 +255,9 @@ class CarmenSource:
     in ``warnings``.
     """
 
+    #: Each message's header.seq is its line's place among its topic's lines: the recording order.
+    seq_is_recording_order = True
+
     def __init__(self, path: Path) -> None:
         self.path = path
         data, cut = _read(path)

@@ -210,6 +210,12 @@ class BagReader:
         return sum(t.count for t in self.topics.values())
 
     @property
+    def seq_is_recording_order(self) -> bool:
+        """Whether each message's ``header.seq`` is its place in the recording, whatever its stamp says (a
+        CARMEN log's line order), not a publisher's counter that may restart or interleave with another's."""
+        return bool(getattr(self._source, "seq_is_recording_order", False))
+
+    @property
     def duration_ns(self) -> int:
         """Time from the first to the last message, int nanoseconds."""
         return max(0, self.end_ns - self.start_ns)

@@ -18,10 +18,10 @@ from bagtools.trajectory import read_tum
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "sim_lap_cloud_20s"
 
 
-def _log_with_stamps(tmp_path: Path, stamp_of) -> tuple[Path, int]:
-    """The fixture's scans as a CARMEN log whose laser lines are stamped ``stamp_of(k)`` (text)."""
+def _log_with_stamps(tmp_path: Path, stamp_of, bag: Path = FIXTURE) -> tuple[Path, int]:
+    """``bag``'s scans as a CARMEN log whose laser lines are stamped ``stamp_of(k)`` (text)."""
     clf = tmp_path / "full.clf"
-    write_flaser_log(FIXTURE, clf)
+    write_flaser_log(bag, clf)
     out, k = [], 0
     for line in clf.read_text().splitlines():
         words = line.split()
@@ -83,3 +83,43 @@ def test_slam_and_ndt_odom_place_every_scan_of_a_log_stamped_zero(tmp_path: Path
         assert np.ptp(reference.positions[:, :2], axis=0).max() > 0.3  # the robot moves
         # without the stamps the motion model knows less (every step 1 s): the same path, less closely
         assert np.abs(trajectory.positions - reference.positions).max() < 0.25
+
+
+def test_a_log_whose_clock_runs_backwards_is_taken_in_its_lines_order(tmp_path: Path) -> None:
+    """Every stamp before the one on the line before it: a CARMEN log's lines are its recording order (its reader
+    sorts them by stamp), so the clock is judged in that order, ignored, and the scans taken in line order."""
+    log, n = _log_with_stamps(tmp_path, lambda k: f"{5000 - 0.2 * k:.6f}")
+    with open_bag(log) as bag:
+        clock = scan_clock(bag, "/scan")
+        assert not clock.usable and clock.why == f"{n - 1} of {n - 1} stamps are not after the one before"
+        items = list(ScanStream(bag, "/scan", clock=clock, increasing=True, desc=None))
+    assert len(items) == n  # none skipped as going backwards
+    # the k-th line (header.seq k) is stamped k seconds after the first line's stamp, whatever order the bag gave
+    assert all(item.scan.stamp_ns == clock.first_ns + item.seq * LOGGING_ORDER_STEP_NS for item in items)
+    assert clock.first_ns == 5000 * 10**9
+
+
+def test_a_clock_that_restarts_half_way_keeps_the_lines_order(tmp_path: Path) -> None:
+    """A logger's clock reset half way (the second half stamped before the first; farther from its place in stamp
+    order than a publisher's seq is trusted): the stamps still time the steps, and the scans are registered in the
+    order of their lines, each posed at its own stamp: the path the true stamps give, not the halves interleaved."""
+    from bagtools_simulate.pipeline import SimConfig, simulate_bag
+
+    bag = tmp_path / "lap"
+    simulate_bag(bag, SimConfig(duration_s=70.0, cloud=False, seed=5))
+    half = 175  # 350 scans at 5 Hz: the second half moves 175 places, beyond MAX_REORDER_SCANS
+    log, n = _log_with_stamps(tmp_path, lambda k: f"{(100 + 0.2 * k) if k < half else (10 + 0.2 * k):.6f}", bag)
+    (tmp_path / "timed").mkdir()
+    timed, _ = _log_with_stamps(tmp_path / "timed", lambda k: f"{100 + 0.2 * k:.6f}", bag)
+    assert n > 2 * half - 5
+    done = _run("ndt-odom", log, tmp_path / "reset")
+    assert done.returncode == 0, done.stderr
+    assert "registered in recording order" in done.stderr and "cannot time its scans" not in done.stderr
+    assert _run("ndt-odom", timed, tmp_path / "timed_out").returncode == 0
+    got, want = read_tum(tmp_path / "reset" / "trajectory.tum"), read_tum(tmp_path / "timed_out" / "trajectory.tum")
+    assert len(got) == len(want) == n
+    # the same scans at their own stamps (the reset ones 90 s back), each where the timed run has it
+    shift = np.where(np.arange(n) < half, 0, 90 * 10**9)
+    by_stamp = {int(s): p for s, p in zip(got.stamps_ns, got.positions)}
+    moved = np.array([by_stamp[int(s) - int(d)] for s, d in zip(want.stamps_ns, shift)])
+    assert np.abs(moved - want.positions).max() < 0.05
