@@ -20,9 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bagtools.dataset.scans import (
-    MAX_REORDER_SCANS, ScanClock, ScanStream, recording_order, require_topic, scan_clock, stamped_late,
-)
+from bagtools.dataset.scans import ScanClock, ScanStream, recording_order, require_topic, scan_clock, stamped_late
 from bagtools.errors import BagtoolsError
 from bagtools.io import (
     LASERSCAN_TYPES, ODOMETRY_TYPES, BagReader, LaserScanArrays, TfArrays, TfCollector, decode_odometry,
@@ -96,15 +94,12 @@ class LaserDataset:
         self.reordered = 0
         self.repeated = 0
         self.stamps_ignored: str | None = None  # why the scans' stamps were ignored (logging order instead)
-        self._max_shift: int | None = MAX_REORDER_SCANS
 
     def read(self, bag: BagReader) -> ScanInputs:
         """What the front end is fed, read from the open ``bag``: the usable scans, the order to register them in,
         the odometry at their stamps, the laser's mount (see :class:`ScanInputs`). Frames, counts and warnings
         are set on the dataset on the way."""
         require_topic(bag, self.topic, LASERSCAN_TYPES, "LaserScan")
-        # how far header.seq may move a scan from its place in stamp order and still be its recording order
-        self._max_shift = None if bag.seq_is_recording_order else MAX_REORDER_SCANS
         self._load_odometry(bag)
         clock = scan_clock(bag, self.topic)
         self.stamps_ignored = None if clock.usable else clock.why
@@ -246,7 +241,7 @@ class LaserDataset:
     def _order(self, stamps: np.ndarray) -> np.ndarray:
         """The order to register the scans in: their recording order (:func:`~bagtools.dataset.recording_order`)
         when their stamps disagree with it, else the order read."""
-        order = recording_order(stamps, self.seqs, self._max_shift)
+        order = recording_order(stamps, self.seqs)
         if order is None:
             return np.arange(len(stamps))
         moved = int(np.count_nonzero(np.diff(stamps[order]) < 0))  # scans stamped before the one recorded before them
@@ -294,7 +289,7 @@ class LaserDataset:
         if not samples:
             return np.zeros(0, dtype=np.int64)
         stamps = np.array([s.stamp_ns for s in samples], dtype=np.int64)
-        order = recording_order(stamps, seqs, self._max_shift)
+        order = recording_order(stamps, seqs)
         if order is None:
             return np.zeros(0, dtype=np.int64)
         late = stamps[stamped_late(stamps, order)]

@@ -56,20 +56,18 @@ CHUNK_SCANS = 256
 MAX_REORDER_SCANS = 100
 
 
-def recording_order(stamps_ns: np.ndarray, seqs: list[int | None],
-                    max_shift: int | None = MAX_REORDER_SCANS) -> np.ndarray | None:
+def recording_order(stamps_ns: np.ndarray, seqs: list[int | None]) -> np.ndarray | None:
     """The order the scans were recorded in, when their stamps say otherwise; None when the stamps' order holds.
 
     ``stamps_ns`` (N,) and ``seqs`` (N,): the scans as read (stamp order). ROS 1
     publishers number their messages (``header.seq``) as they send them; when
     every scan has a distinct seq and sorting by it moves no scan more than
-    ``max_shift`` (:data:`MAX_REORDER_SCANS`) places, a scan whose seq is out of
-    step with its stamp was stamped with a time earlier (or later) than its
-    neighbours' (the Intel Research Lab log stamps 631 of 13631 scans up to 0.9 s
-    early). ``max_shift`` None: the seq is the recording order however far it
-    moves a scan (a CARMEN log's lines, :attr:`~bagtools.io.BagReader.seq_is_recording_order`:
-    a clock that went back holds no publisher's restart). Returns the permutation of
-    ``range(N)`` in seq order, or None (no seq, a restart, or nothing out of order).
+    :data:`MAX_REORDER_SCANS` places, a scan whose seq is out of step with its
+    stamp was stamped with a time earlier (or later) than its neighbours' (the
+    Intel Research Lab log stamps 631 of 13631 scans up to 0.9 s early). Returns
+    the permutation of ``range(N)`` in seq order, or None (no seq, a restart, or
+    nothing out of order). (Where the seq is the recording order and the stamps
+    move a scan farther, :func:`scan_clock` finds the clock unusable.)
     """
     n = len(seqs)
     if n < 2 or any(s is None for s in seqs):
@@ -78,7 +76,7 @@ def recording_order(stamps_ns: np.ndarray, seqs: list[int | None],
     order = np.argsort(seq, kind="stable")
     if np.all(order == np.arange(n)) or np.unique(seq).size != n:
         return None
-    if max_shift is not None and np.abs(order - np.arange(n)).max() > max_shift:
+    if np.abs(order - np.arange(n)).max() > MAX_REORDER_SCANS:
         return None
     return order
 
@@ -145,12 +143,19 @@ def scan_clock(bag: BagReader, topic: str) -> ScanClock:
         stamps, first_seq = stamps[order], int(seqs[order[0]])
     steps = np.diff(stamps)
     stuck = int(np.count_nonzero(steps <= 0))
-    if stuck <= UNUSABLE_STAMPS_SHARE * steps.size:
+    # where the seq is the recording order, a stamp that would move its scan farther than a stamp's jitter does
+    # (MAX_REORDER_SCANS) says the clock went back (a restart): it cannot order the log
+    went_back = by_seq and int(np.abs(np.argsort(stamps, kind="stable") - np.arange(stamps.size)).max()) > \
+        MAX_REORDER_SCANS
+    if stuck <= UNUSABLE_STAMPS_SHARE * steps.size and not went_back:
         return ScanClock()
     if np.all(stamps == stamps[0]):
         why = f"every stamp is {stamps[0] / 1e9:.9f} s"
-    else:
+    elif stuck > UNUSABLE_STAMPS_SHARE * steps.size:
         why = f"{stuck} of {steps.size} stamps are not after the one before"
+    else:
+        late = int(np.count_nonzero(stamps[1:] < np.maximum.accumulate(stamps)[:-1]))
+        why = f"the clock went back: {late} of {steps.size} stamps lie before an earlier line's"
     return ScanClock(False, int(stamps[0]), why, by_seq, first_seq if by_seq else 0)
 
 

@@ -99,27 +99,26 @@ def test_a_log_whose_clock_runs_backwards_is_taken_in_its_lines_order(tmp_path: 
     assert clock.first_ns == 5000 * 10**9
 
 
-def test_a_clock_that_restarts_half_way_keeps_the_lines_order(tmp_path: Path) -> None:
-    """A logger's clock reset half way (the second half stamped before the first; farther from its place in stamp
-    order than a publisher's seq is trusted): the stamps still time the steps, and the scans are registered in the
-    order of their lines, each posed at its own stamp: the path the true stamps give, not the halves interleaved."""
+def test_a_clock_that_restarts_half_way_is_ignored_and_the_lines_order_kept(tmp_path: Path) -> None:
+    """A logger's clock reset half way: the second half is stamped before the first, farther from its line than a
+    stamp's jitter moves a scan. Its stamps cannot order the log (the two halves would interleave, some stamped
+    alike): they are ignored, said once, and every scan is taken in line order, 1 s apart: the path the true
+    stamps give."""
     from bagtools_simulate.pipeline import SimConfig, simulate_bag
 
     bag = tmp_path / "lap"
     simulate_bag(bag, SimConfig(duration_s=70.0, cloud=False, seed=5))
-    half = 175  # 350 scans at 5 Hz: the second half moves 175 places, beyond MAX_REORDER_SCANS
+    half = 175  # of 350 scans at 5 Hz: the second half's stamps move them 175 places, beyond MAX_REORDER_SCANS
     log, n = _log_with_stamps(tmp_path, lambda k: f"{(100 + 0.2 * k) if k < half else (10 + 0.2 * k):.6f}", bag)
     (tmp_path / "timed").mkdir()
     timed, _ = _log_with_stamps(tmp_path / "timed", lambda k: f"{100 + 0.2 * k:.6f}", bag)
     assert n > 2 * half - 5
     done = _run("ndt-odom", log, tmp_path / "reset")
     assert done.returncode == 0, done.stderr
-    assert "registered in recording order" in done.stderr and "cannot time its scans" not in done.stderr
+    assert done.stderr.count("cannot time its scans (the clock went back:") == 1, done.stderr
     assert _run("ndt-odom", timed, tmp_path / "timed_out").returncode == 0
     got, want = read_tum(tmp_path / "reset" / "trajectory.tum"), read_tum(tmp_path / "timed_out" / "trajectory.tum")
-    assert len(got) == len(want) == n
-    # the same scans at their own stamps (the reset ones 90 s back), each where the timed run has it
-    shift = np.where(np.arange(n) < half, 0, 90 * 10**9)
-    by_stamp = {int(s): p for s, p in zip(got.stamps_ns, got.positions)}
-    moved = np.array([by_stamp[int(s) - int(d)] for s, d in zip(want.stamps_ns, shift)])
-    assert np.abs(moved - want.positions).max() < 0.05
+    assert len(got) == len(want) == n and np.all(np.diff(got.stamps_ns) == LOGGING_ORDER_STEP_NS)
+    # per scan, not per second, the laser odometry drifts its own way (0.55 m at most over these 15 m); the two
+    # halves interleaved by their stamps would put scans metres from their place
+    assert np.hypot(*(got.positions - want.positions)[:, :2].T).max() < 1.0
