@@ -21,7 +21,8 @@ tests/test_architecture.py):
 - ``cli``: the thin click shell (``bagtools --help``).
 
 Modules: ``outputs`` (atomic writes, --force, staging), ``errors``, ``limits``
-(memory budget), ``progress``, ``figures``, ``simtruth`` (a bag's /ground_truth). The simulator installs as
+(memory budget), ``progress``, ``figures``, ``stamps`` (stamps written as text, read exactly), ``simtruth`` (a
+bag's /ground_truth). The simulator installs as
 ``bagtools_simulate``.
 """
 

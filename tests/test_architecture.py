@@ -12,7 +12,7 @@ COMMANDS = ("info", "grid", "map_cloud", "ndt_odom", "slam", "localize", "export
 #: Bottom up; a package imports only from lower layers (and itself). Keep in step with docs/architecture.md.
 LAYERS: list[set[str]] = [
     {"errors"},
-    {"limits", "progress", "outputs", "figures"},
+    {"limits", "progress", "outputs", "figures", "stamps"},
     {"io", "transforms"},
     {"tf", "simtruth", "results"},
     {"dataset"},

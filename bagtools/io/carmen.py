@@ -42,6 +42,7 @@ import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from bagtools.io.records import RawRecord, TopicInfo
+from bagtools.stamps import seconds_text_to_ns as stamp_text_to_ns  # a line's stamp, exactly
 
 #: Suffixes of a CARMEN log (optionally followed by .gz).
 CARMEN_SUFFIXES = (".clf", ".log")
@@ -107,23 +108,6 @@ def looks_like_carmen(path: Path) -> bool:
             continue
         return words[0].decode("ascii", "replace") in _KNOWN or words[0].isupper()
     return False
-
-
-def stamp_text_to_ns(text: str) -> int:
-    """A decimal seconds string as int nanoseconds, exactly (no float on the way), nanoseconds beyond the ninth
-    digit cut: "1234.567890", or in C's %g form, as a logger that wrote six significant digits did ("1.10002e+09":
-    every stamp of such a log may come out equal, which the dataset's clock then says)."""
-    text = text.strip()
-    mantissa, e, exponent = text.replace("E", "e").partition("e")
-    whole, _, frac = mantissa.partition(".")
-    if not whole.lstrip("-").isdigit() or (frac and not frac.isdigit()) or \
-            (e and not (exponent.lstrip("+-").isdigit() and len(exponent.lstrip("+-")) <= 2)):
-        raise ValueError(f"not a timestamp: {text!r}")
-    shift = 9 + (int(exponent) if e else 0)  # nanoseconds: the decimal point moved right by this many digits
-    digits = whole.lstrip("-") + frac
-    point = len(whole.lstrip("-")) + shift  # where the point falls in ``digits``
-    ns = int((digits + "0" * max(point - len(digits), 0))[:max(point, 0)] or 0)
-    return -ns if whole.startswith("-") else ns
 
 
 @dataclass(frozen=True)

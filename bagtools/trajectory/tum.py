@@ -14,6 +14,7 @@ import numpy as np
 
 from bagtools.errors import BagtoolsError
 from bagtools.outputs import write_text_atomic
+from bagtools.stamps import seconds_text_to_ns
 from bagtools.transforms import quat2tform, quat2xyzw, tform2quat, xyzw2quat
 
 
@@ -151,13 +152,7 @@ def read_tum(path: str | Path) -> Trajectory:
 
 
 def _stamp_ns(text: str) -> int:
-    """A TUM stamp in seconds ('1700000000.123456789', '1.7e9') as int ns, exact for plain decimals."""
-    whole, dot, frac = text.partition(".")
+    """A TUM stamp in seconds ('1700000000.123456789', '1.7e9') as int ns, exactly."""
     if text.startswith("-"):
         raise ValueError(f"negative stamp {text}")
-    if whole.isdigit() and (not dot or frac.isdigit() or frac == ""):
-        return int(whole) * 1_000_000_000 + int((frac + "000000000")[:9])
-    seconds = float(text)  # exponent notation
-    if not np.isfinite(seconds) or seconds < 0 or seconds > MAX_TUM_STAMP_NS / 1e9:
-        raise ValueError(f"stamp {text} is not a time in seconds")
-    return int(round(seconds * 1e9))
+    return seconds_text_to_ns(text)
