@@ -208,7 +208,8 @@ class LaserDataset:
             raise BagtoolsError(f"the bag's tf data cannot be used: {err.problem}", bag.path) from err
 
     def _read_scans(self, bag: BagReader, clock: ScanClock) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Stamps (N,) int64 (by ``clock``) and valid points (M_k,2) of the usable scans, in bag order."""
+        """Stamps (N,) int64 (by ``clock``) and valid points (M_k,2) of the usable scans, in bag order (in logging
+        order when the clock is not usable)."""
         stamps: list[int] = []
         points: list[np.ndarray] = []
         seqs: list[int | None] = []
@@ -231,8 +232,8 @@ class LaserDataset:
         self.skipped = dict(stream.skipped) | dict(far)
         self.warnings.extend(f"{n} scan(s) on {self.topic} skipped: {why}" for why, n in far.items())
         self.warnings.extend(stream.warnings())
-        order = np.argsort(np.asarray(stamps, dtype=np.int64), kind="stable")  # the clock's logging order may
-        if not clock.usable and np.any(np.diff(order) != 1):                    # not be the bag's (by_seq)
+        if not clock.usable:  # stamped in logging order, which may not be the bag's (a CARMEN log's lines): sorted
+            order = np.argsort(np.asarray(stamps, dtype=np.int64), kind="stable")
             stamps, points, seqs = [stamps[k] for k in order], [points[k] for k in order], [seqs[k] for k in order]
             self.scans = [self.scans[k] for k in order] if self.keep_scans else self.scans
         self.seqs = seqs
