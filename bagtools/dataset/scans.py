@@ -137,6 +137,7 @@ def scan_clock(bag: BagReader, topic: str) -> ScanClock:
     stamps = np.array(stamps, dtype=np.int64)
     if stamps.size < 3:
         return ScanClock()
+    first_seq = 0
     by_seq = bag.seq_is_recording_order and None not in seqs and len(set(seqs)) == len(seqs)
     if by_seq:
         order = np.argsort(np.array(seqs, dtype=np.int64), kind="stable")
@@ -156,7 +157,7 @@ def scan_clock(bag: BagReader, topic: str) -> ScanClock:
     else:
         late = int(np.count_nonzero(stamps[1:] < np.maximum.accumulate(stamps)[:-1]))
         why = f"the clock went back: {late} of {steps.size} stamps lie before an earlier line's"
-    return ScanClock(False, int(stamps[0]), why, by_seq, first_seq if by_seq else 0)
+    return ScanClock(False, int(stamps[0]), why, by_seq, first_seq)
 
 
 def _header_ns(msg: object) -> int:

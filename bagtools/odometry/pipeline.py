@@ -205,15 +205,12 @@ def register_scans(inputs: ScanInputs, options: NdtOdomOptions) -> tuple[LaserOd
     ``options`` give them), points in the base frame, with the wheel odometry's pose when trusted. Returns the
     front end and the base's poses (N, 3) [x, y, theta] in the odometry frame at the scans' stamps (stamp order)."""
     order, odometry = inputs.order, inputs.odometry
-    points = [inputs.points[i] for i in order]
-    front = LaserOdometry(options.front_end(cell_size_for(points)))
-    R, t = inputs.T_base_scan[:2, :2], inputs.T_base_scan[:2, 3]
+    front = LaserOdometry(options.front_end(cell_size_for([inputs.points[i] for i in order])))
     odom_xyt = None if odometry is None else np.where(odometry[1][order][:, None], tform2pose(odometry[0][order]),
                                                       np.nan)
-    stamps = inputs.stamps_ns[order]
-    for k in progress(range(len(stamps)), total=len(stamps), desc="matching", unit="scan"):
+    for k, i in enumerate(progress(order, total=len(order), desc="matching", unit="scan")):
         odom = None if odom_xyt is None or not np.isfinite(odom_xyt[k]).all() else odom_xyt[k]
-        front.register(int(stamps[k]), points[k] @ R.T + t, odom)
+        front.register(int(inputs.stamps_ns[i]), inputs.points_base(i), odom)
     poses = np.empty((len(inputs.stamps_ns), 3))
     poses[order] = front.run.poses()  # the steps in recording order, the trajectory in stamp order
     return front, poses

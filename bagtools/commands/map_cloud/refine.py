@@ -128,7 +128,7 @@ class CloudRefiner:
 
     def _rows_near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Row indices (sorted) of the map's points in the BLOCK_M cubes that meet the box ``lo``..``hi`` (m)."""
-        first, last = _block_cells(lo[None])[0], _block_cells(hi[None])[0]
+        first, last = np.floor(lo / BLOCK_M).astype(np.int64), np.floor(hi / BLOCK_M).astype(np.int64)
         if np.prod(last - first + 1, dtype=np.float64) <= len(self._blocks):  # the cubes of the box
             cells = np.stack(np.meshgrid(*(np.arange(a, b + 1) for a, b in zip(first, last)), indexing="ij"), axis=-1)
             keys = _cell_keys(cells.reshape(-1, 3)).tolist()
@@ -169,7 +169,7 @@ class CloudRefiner:
         else:
             self._colors = None
         self._voxels = np.insert(self._voxels, where[new], keys[new])
-        cube = _cell_keys(_block_cells(points[rows]))
+        cube = _voxel_keys(points[rows], BLOCK_M)
         order = np.argsort(cube, kind="stable")
         cubes, starts = np.unique(cube[order], return_index=True)
         for key, group in zip(cubes.tolist(), np.split(order + start, starts[1:])):
@@ -192,14 +192,8 @@ class CloudRefiner:
 
 
 def _voxel_keys(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """One int64 key per point: its voxel (21 bits per axis, about 100 km at 5 cm)."""
-    cells = np.floor(points / voxel_m).astype(np.int64) + (1 << 20)
-    return (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
-
-
-def _block_cells(points: np.ndarray) -> np.ndarray:
-    """The BLOCK_M cube (integer x, y, z) each of (N,3) ``points`` (m) lies in."""
-    return np.floor(points / BLOCK_M).astype(np.int64)
+    """One int64 key per (N,3) point: its ``voxel_m`` voxel (21 bits per axis, about 100 km at 5 cm)."""
+    return _cell_keys(np.floor(points / voxel_m).astype(np.int64))
 
 
 def _cell_keys(cells: np.ndarray) -> np.ndarray:
