@@ -61,6 +61,7 @@ def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_
     from bagtools.outputs import check_outputs
     from bagtools.results import run_outputs
     from bagtools.commands.slam import SLAM_FILES, SlamOptions, SlamPipeline, write_slam
+    from bagtools.pose_graph.backend import TAKEN_BY_GRAPH
 
     side, note = map_cell_side(cell_size, cells_per_metre, resolution, resolution_in_metres=True)
 
@@ -77,8 +78,10 @@ def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_
     loops = s["loop_closure"]
     reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())
     uncertain = s["front_end"].get("ambiguous", 0)
+    taken = s["graph"].get(TAKEN_BY_GRAPH, 0)  # matches no second one confirmed, taken by the graph's GNC
     click.echo(f"{s['scans']} scans, {s['keyframes']} keyframes; {loops['candidates']} loop candidates: "
-               f"{loops['accepted']} accepted, {loops['rejected']} rejected{f' ({reasons})' if reasons else ''}; "
+               f"{loops['accepted']} accepted{f' ({taken} unconfirmed, taken by the graph)' if taken else ''}, "
+               f"{loops['rejected']} rejected{f' ({reasons})' if reasons else ''}; "
                f"optimized in {s['optimization']['time_s']:.2f} s; {s['timing_s']['total']:.1f} s in all"
                + (f"; {uncertain} front-end step(s) left uncertain (another place matched almost as well)"
                   if uncertain else ""))

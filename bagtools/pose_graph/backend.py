@@ -32,9 +32,13 @@ system would:
 
 At the end no keyframe comes after the matches still waiting for a follow-up:
 each is followed up at the keyframes before it instead (the same evidence: the
-old chain, the match, and the new chain between the two keyframes). Matches
-still waiting then are rejected, and the graph is optimized once more (with
-the same outlier check).
+old chain, the match, and the new chain between the two keyframes). The
+matches no second one confirmed are then handed to the graph (but look-alikes
+and follow-ups, which repeat their match's error): GTSAM's graduated
+non-convexity (``GncLMOptimizer``, truncated least squares) over the graph
+with them, its constraints known inliers, takes those whose residual stays
+under the outlier gate (:data:`TAKEN_BY_GRAPH` counts them); the others are
+rejected, and the graph is optimized once more (with the same outlier check).
 
 Graph distances (for the search's uncertainty) are shortest paths through the
 graph (``scipy.sparse.csgraph.dijkstra``): an odometry edge weighs its length
@@ -69,6 +73,8 @@ LOOSE_EDGE_M, LOOSE_EDGE_RAD = 0.1, 0.1
 #: chi2 of 3 degrees of freedom at 99.9 %, and its median.
 CHI2_3DOF_999 = 16.27
 CHI2_3DOF_MEDIAN = 2.366
+#: ``BackEndResult.counts`` key (summary.json ``graph``): unconfirmed matches the graph's GNC took as inliers.
+TAKEN_BY_GRAPH = "unconfirmed matches the graph took"
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,7 @@ class _Builder:
         if self.check is not None:
             self._follow_up_backwards()
             self.check.flush()
+            self._judge_unconfirmed()
         self._optimize(node=len(self.keyframe_steps) - 1)
         if self.counts["unlinked keyframes"]:
             self.warnings.append(f"{self.counts['unlinked keyframes']} keyframe(s) had no match against the keyframe "
@@ -292,6 +299,24 @@ class _Builder:
             self._add_loop(c)
         return bool(accepted)
 
+    def _judge_unconfirmed(self) -> None:
+        """The matches no second one confirmed (but look-alikes and follow-ups, which repeat their match's error)
+        are handed to the graph: those GTSAM's graduated non-convexity takes as inliers, with the graph's
+        constraints as known inliers and the outlier gate as the inlier threshold, are accepted."""
+        doubtful = [c for c in self.candidates if c.status == LoopOutcome.UNCONFIRMED and c.T_old_new is not None
+                    and c.look_alike is not True and c.kind != LoopKind.FOLLOW_UP]
+        if not doubtful:
+            return
+        _, chi2 = self.graph.loop_chi2()
+        inliers = self.graph.judge([Constraint(c.old, c.new, c.T_old_new, c.covariance, LOOP) for c in doubtful],
+                                   self.outlier_gate(chi2))
+        for cand, inlier in zip(doubtful, inliers):
+            if inlier:
+                cand.status = LoopOutcome.ACCEPTED
+                self.check.accepted.append(cand)
+                self._add_loop(cand)
+                self.counts[TAKEN_BY_GRAPH] += 1
+
     def _add_loop(self, cand: LoopCandidate) -> None:
         self.graph.add(Constraint(cand.old, cand.new, cand.T_old_new, cand.covariance, LOOP))
         self._loops_since_optimization += 1
@@ -357,4 +382,4 @@ def build_pose_graph(steps: list[ScanStep], options: BackEndOptions | None = Non
     return _Builder(steps, options or BackEndOptions()).run()
 
 
-__all__ = ["BackEndOptions", "BackEndResult", "LoopOutcome.PENDING", "build_pose_graph"]
+__all__ = ["BackEndOptions", "BackEndResult", "TAKEN_BY_GRAPH", "build_pose_graph"]

@@ -188,6 +188,26 @@ class PoseGraph:
         return Optimization(int(optimizer.iterations()), float(graph.error(initial)), float(graph.error(result)),
                             time.perf_counter() - t0)
 
+    def judge(self, extra: list[Constraint], max_chi2: float) -> np.ndarray:
+        """Which of ``extra`` (constraints not in the graph) are inliers (bool, (len(extra),)) of the graph with
+        them, every constraint of the graph a known inlier: GTSAM's graduated non-convexity (``GncLMOptimizer``,
+        truncated least squares), a constraint being an inlier when its squared Mahalanobis residual at the
+        solution is under ``max_chi2``. The estimate is not changed."""
+        if not extra:
+            return np.zeros(0, dtype=bool)
+        graph = self.factor_graph(robust=False)
+        known = graph.size()
+        for c in extra:
+            graph.add(gtsam.BetweenFactorPose2(c.i, c.j, gtsam.Pose2(*c.T_i_j),
+                                               gtsam.noiseModel.Gaussian.Covariance(c.covariance)))
+        params = gtsam.GncLMParams()
+        params.setLossType(gtsam.GncLossType.TLS)
+        params.setKnownInliers(list(range(known)))
+        optimizer = gtsam.GncLMOptimizer(graph, self.values(), params)
+        optimizer.setInlierCostThresholds(0.5 * max_chi2)  # a factor's cost is half its squared residual
+        optimizer.optimize()
+        return np.asarray(optimizer.getWeights())[known:] > 0.5
+
     def chi2(self, indexes: list[int]) -> np.ndarray:
         """Squared Mahalanobis residual (Gaussian, no kernel) of the constraints at ``indexes``, at the estimate."""
         out = np.empty(len(indexes))

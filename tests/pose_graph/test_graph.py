@@ -72,6 +72,23 @@ def test_wrong_loop_stands_out_by_chi2_and_its_removal_restores_the_result() -> 
     assert graph.loop_chi2()[1].max() < 16.27
 
 
+def test_the_graph_judges_doubtful_loops_by_graduated_non_convexity() -> None:
+    """Loops handed to the graph unconfirmed: GNC keeps the ones the accepted constraints agree with (a right loop
+    across the square, another later) and drops a look-alike 2 m off, and the estimate is left as it was."""
+    truth = _square()
+    n = len(truth) - 1
+    graph = _drifting_graph(truth)
+    graph.add(Constraint(0, n, se2_between(truth[0], truth[n]), LOOP_COV, LOOP))
+    graph.optimize()
+    before = graph.poses.copy()
+    doubtful = [Constraint(5, 25, se2_between(truth[5], truth[25]), LOOP_COV, LOOP),
+                Constraint(10, 30, np.array([2.0, 1.5, 0.3]), LOOP_COV, LOOP),
+                Constraint(12, 38, se2_between(truth[12], truth[38]), LOOP_COV, LOOP)]
+    assert graph.judge(doubtful, 16.27).tolist() == [True, False, True]
+    assert np.array_equal(graph.poses, before) and len(graph.constraints) == n + 1
+    assert graph.judge([], 16.27).shape == (0,)
+
+
 def test_g2o_text_reads_back_with_gtsam(tmp_path) -> None:
     truth = _square(n_side=3)
     graph = _drifting_graph(truth)

@@ -14,7 +14,8 @@ import pytest
 
 from bagtools.io.carmen import write_flaser_log
 from bagtools.commands.slam import SlamOptions, SlamPipeline
-from bagtools.pose_graph.loops import LoopKind, LoopOutcome
+from bagtools.pose_graph.backend import TAKEN_BY_GRAPH
+from bagtools.pose_graph.loops import LoopOutcome
 from tests.conftest import REPO, ros1_scan_slice
 
 BENCHMARK_DIR = REPO.parent / "shared" / "data" / "benchmark"
@@ -83,25 +84,23 @@ def test_a_place_that_only_looks_like_an_old_one_closes_no_loop(fr079_second_hal
     """Two hundred seconds after passing a room, the robot's scans match it 2.5-3 m off (scores 0.56-0.61, where
     the true pose scores 0.17-0.30: the two visits saw different parts). Taken, those loops bent the map: 0.148 m
     (max 1.68 m). Each puts walls where the other map saw floor, so they are refused, and the map holds (the
-    whole log's slam scores 0.0317 m on these relations)."""
+    whole log's slam scores 0.0317 m on these relations).
+
+    The log's last loops (keyframes 432-435 seeing 336 and 394) come too late for a second match: no keyframe comes
+    after them. Rejected, they left the end of the log 0.4 m off (0.051 m, max 0.42 m, with gtsam 4.3 and numpy
+    2.4); the graph's graduated non-convexity takes them with the rest, and the map holds."""
     options = SlamOptions(relations=str(BENCHMARK_DIR / "fr079.relations"))
     summary = SlamPipeline(fr079_second_half, options).run().summary
     assert summary["loop_closure"]["rejected_by_reason"].get(LoopOutcome.SEES_THROUGH, 0) >= 1, summary["loop_closure"]
+    assert summary["graph"].get(TAKEN_BY_GRAPH, 0) >= 1, summary["graph"]
     scored = summary["relations"]["slam"]
     assert scored["used"] > 700
     assert scored["trans_mean_m"] < 0.035 and scored["trans_max_m"] < 0.3, scored
 
 
-def test_a_match_waiting_when_the_log_ends_is_followed_up_at_the_keyframes_before_it(fr079_second_half: Path) -> None:
-    """Scans only, fr079's second half ends 40 s after its last confirmed loop. A right match (score 0.79, correcting
-    the laser odometry's drift by 0.36 m) still waits for its follow-up when the log ends: no later keyframe comes.
-    The keyframes before it are as good a follow-up; without one, the drift stayed (0.0513 m, max 0.42 m; the whole
-    log's slam scores 0.032 m on these relations)."""
+def test_the_second_half_alone_holds_without_odometry(fr079_second_half: Path) -> None:
+    """Scans only, fr079's second half mapped alone: the laser odometry's drift (0.10 m on these relations) is taken
+    out to the whole log's figure (0.032 m)."""
     options = SlamOptions(use_odometry=False, relations=str(BENCHMARK_DIR / "fr079.relations"))
-    result = SlamPipeline(fr079_second_half, options).run()
-    last = len(result.back_end.keyframe_steps) - 1
-    confirmed = [c for c in result.back_end.candidates if c.kind == LoopKind.FOLLOW_UP
-                 and c.status == LoopOutcome.ACCEPTED and c.follows is not None and c.new < c.follows.new]
-    assert confirmed and max(c.follows.new for c in confirmed) > last - 5, [(c.old, c.new) for c in confirmed]
-    scored = result.summary["relations"]["slam"]
+    scored = SlamPipeline(fr079_second_half, options).run().summary["relations"]["slam"]
     assert scored["trans_mean_m"] < 0.036 and scored["trans_max_m"] < 0.3, scored
