@@ -4,8 +4,10 @@ Each log three ways, one whole ``bagtools slam --no-odometry`` command in its ow
 
 - as distributed (stamps 0.1 to 230 s apart);
 - its stamps rewritten one second apart, in logging order;
-- every stamp zero (the logs of the collection whose stamps cannot be used): the
-  scans are taken in logging order (:class:`bagtools.dataset.ScanClock`).
+- every stamp zero, every stamp equal (written by C's ``%.6g``: "1.1e+09") and
+  every stamp before the one on the line before (the logs of the collection
+  whose stamps cannot be used, as its README names them): the scans are taken
+  in logging order (:class:`bagtools.dataset.ScanClock`).
 
 Rows: the aligned APE (SE(2) alignment, RMSE and max) against the log's corrected
 poses, paired by logging order; baseline in the same run: the front end alone
@@ -81,7 +83,12 @@ def run(quick: bool) -> list[Row]:
                 continue
             sources = {"as distributed": log,
                        "stamps 1 s apart": restamped(log, Path(tmp) / f"{name}-steady.log", lambda k: f"{k:.6f}"),
-                       "every stamp zero": restamped(log, Path(tmp) / f"{name}-zero.log", lambda k: "0.000000")}
+                       "every stamp zero": restamped(log, Path(tmp) / f"{name}-zero.log", lambda k: "0.000000"),
+                       # C's %.6g of a clock near 1.1e9 s: every stamp equal ("1.1e+09")
+                       "stamps in six digits": restamped(log, Path(tmp) / f"{name}-6g.log",
+                                                         lambda k: f"{1.1e9 + k:.6g}"),
+                       "stamps going backwards": restamped(log, Path(tmp) / f"{name}-back.log",
+                                                           lambda k: f"{1.0e6 - k:.6f}")}
             for how, source in sources.items():
                 out = Path(tmp) / f"{name}-{how.replace(' ', '_')}"
                 cpu_s, rss_mb, _ = _run(["slam", str(source), "--out", str(out), "--no-odometry", "--no-mcap"])
