@@ -114,7 +114,7 @@ class LaserOdometry:
             if searched is not None:
                 matches.append(searched)
                 best = max(matches, key=prior.objective)
-            gap = dt > opts.max_gap_s and prior.kind != "odometry"
+            gap = self._gap(dt) and prior.kind != "odometry"
             if (best.score < self._trust_score() or gap) and prior.wide is not None and len(points) >= MIN_WIDE_POINTS:
                 # The guess may be what is wrong: search what the robot can have done instead.
                 if prior.kind == "odometry":  # rarely wrong: its best alternative on the submap is enough
@@ -268,13 +268,8 @@ class LaserOdometry:
     def _needs_search(self, matches: list[Match], best: Match, dt: float, prior: MotionPrior) -> bool:
         """The guess cannot be trusted: a poor score, results that disagree, a long gap, or a result the
         prior finds unlikely."""
-        if dt > self.options.max_gap_s:
-            return True
-        if prior.sd[0] > BASIN_M or prior.sd[2] > BASIN_RAD:  # the prior is wider than NDT's basin
-            return True
-        if best.score < self._trust_score():
-            return True
-        if prior.mahalanobis2(best.pose) > PRIOR_GATE2:
+        if (self._gap(dt) or prior.sd[0] > BASIN_M or prior.sd[2] > BASIN_RAD  # the prior is wider than NDT's basin
+                or best.score < self._trust_score() or prior.mahalanobis2(best.pose) > PRIOR_GATE2):
             return True
         rivals = [m for m in matches if m is not best and m.score > 0.8 * best.score]
         return any(not _close(m.pose, best.pose, AGREE_M, AGREE_RAD) for m in rivals)
@@ -364,6 +359,11 @@ class LaserOdometry:
         stamped before the scan recorded before it), as the next scan of its laser; STAMP_JITTER_S before any."""
         recent = self._steps_s[-20:]
         return float(np.median(recent)) if recent else STAMP_JITTER_S
+
+    def _gap(self, dt: float) -> bool:
+        """A step over ``max_gap_s`` and over 1 / SHORT_STEP_RATIO of the recent typical one (a scan-per-metre log's
+        rhythm is no gap): the robot may have done anything meanwhile."""
+        return dt > self.options.max_gap_s and SHORT_STEP_RATIO * dt > self._typical_step()
 
     def _short_step(self, dt: float) -> bool:
         """A time step under SHORT_STEP_RATIO of the recent typical one: its stamp is suspect."""

@@ -243,7 +243,8 @@ WIDE_MAX_PRIOR_COST = 0.5
 #: than SHORT_STEP_RATIO of the recent typical one (its stamp is suspect: a log resampled from another clock puts
 #: 0.15 s on a 30-degree turn), the largest window (MAX_SEARCH_M, any heading, around the previous pose) is
 #: searched with no reach at all. A match there is taken when it scores at least the trust score and
-#: BEYOND_REACH_GAIN more than the best within reach.
+#: BEYOND_REACH_GAIN more than the best within reach. A step over 1 / SHORT_STEP_RATIO of the typical one (and
+#: over ``max_gap_s``) is a gap: the robot may have done anything meanwhile.
 SHORT_STEP_RATIO = 0.25
 BEYOND_REACH_GAIN = 0.2
 

@@ -293,3 +293,31 @@ def test_turns_are_searched_only_where_scans_lie_far_apart() -> None:
 
     assert spaced(1.0)._turn_starts() == 3  # +-0.2, 0.4, 0.6 rad: two sigmas of 0.3 rad per metre
     assert spaced(0.1)._turn_starts() == 0
+
+
+def test_a_gap_is_measured_against_the_logs_own_rhythm() -> None:
+    """A step is a gap (the robot may have done anything: the wide search) when it is over ``max_gap_s`` and over
+    four times the recent typical step: a dense log's 2 s pause is one, a scan-per-metre log's 6 s step is not, its
+    25 s pause is."""
+    odometry = LaserOdometry()
+    assert odometry._gap(2.0) and not odometry._gap(1.0)  # no steps yet: max_gap_s (1.5 s)
+    odometry._steps_s = [0.1] * 20
+    assert odometry._gap(2.0) and not odometry._gap(1.0)
+    odometry._steps_s = [5.0] * 20
+    assert not odometry._gap(6.0) and odometry._gap(25.0)
+
+
+def test_scans_seconds_apart_are_not_searched_widely_at_every_step(lap, monkeypatch) -> None:
+    """Scans 5 s apart by their stamps (a log that writes a scan per metre): steps the motion model and the scene
+    agree on are not searched over what the robot can do in 5 s; every step is right."""
+    steps, truth = lap
+    keep = np.arange(0, len(steps), 5)
+    wide = []
+    original = LaserOdometry._search_wide
+    monkeypatch.setattr(LaserOdometry, "_search_wide", lambda self, *a: wide.append(1) or original(self, *a))
+    front = LaserOdometry(FrontEndOptions(cell_size_m=0.5, voxel_m=0.1))
+    for k in keep:
+        front.register(int(steps[0].stamp_ns + 5 * (steps[k].stamp_ns - steps[0].stamp_ns)), steps[k].points_base)
+    err = step_errors(front.run.poses(), truth[keep])
+    assert np.hypot(err[:, 0], err[:, 1]).max() < 0.03 and np.abs(err[:, 2]).max() < np.radians(1.0)
+    assert len(wide) <= 0.25 * (len(keep) - 1), (len(wide), len(keep))

@@ -16,7 +16,7 @@ import pytest
 from bagtools.commands.slam import SlamOptions, SlamPipeline
 from bagtools.trajectory.evaluate import ape_aligned
 from bagtools.trajectory import Trajectory, read_tum
-from bench.bench_slam_unseen import restamped
+from bench.bench_slam_unseen import restamped, revisit_consistency
 from tests.conftest import REPO
 
 RADISH_DIR = REPO.parent / "shared" / "data" / "radish"
@@ -29,12 +29,18 @@ def _log(name: str) -> Path:
     return path
 
 
-def _aligned_ape(source: Path, name: str) -> tuple[float, float]:
-    """slam of ``source``, scans only: (RMSE, max) in m of its SE(2)-aligned positions against log ``name``'s
-    corrected poses, paired in logging order (one pose per scan, whatever the stamps)."""
+def _slam(source: Path, name: str) -> tuple[Trajectory, Trajectory]:
+    """slam of ``source``, scans only, and log ``name``'s corrected poses, one per scan in logging order."""
     estimate = SlamPipeline(source, SlamOptions(use_odometry=False)).run().trajectory
     reference = read_tum(RADISH_DIR / f"{name}.reference.tum")
     assert len(estimate) == len(reference), f"{len(estimate)} poses for {len(reference)} scans"
+    return estimate, reference
+
+
+def _aligned_ape(source: Path, name: str) -> tuple[float, float]:
+    """(RMSE, max) in m of slam's SE(2)-aligned positions (``_slam``) against the corrected poses, paired in
+    logging order (whatever the stamps)."""
+    estimate, reference = _slam(source, name)
     errors = ape_aligned(Trajectory(estimate.stamps_ns, reference.poses), estimate)
     return errors.rmse, errors.max
 
@@ -64,8 +70,15 @@ def test_steady_stamps_give_the_same_map(tmp_path: Path) -> None:
 
 def test_a_large_hall_is_not_yet_to_target() -> None:
     """Edmonton: a convention centre with few revisits (63 of 340 scans lie within 2 m of an earlier pass). Its
-    laser sees to 51 m (a PARAM said 10 m, and scans held a dozen returns): 0.35 m as distributed and 0.45 m with
-    steady stamps (1.09 and 0.53 m with the PARAM's 10 m; 5.1 and 7.8 m before the motion model). The drift between
-    revisits stays (issue #40 open). Bounds what holds."""
-    rmse, worst = _aligned_ape(_log("edmonton"), "edmonton")
-    assert rmse <= 0.7 and worst <= 2.0, (rmse, worst)
+    laser sees to 51 m (a PARAM said 10 m, and scans held a dozen returns). 0.35-0.60 m as distributed, 0.40-0.45 m
+    with steady stamps, over the sessions (5.1 and 7.8 m before the motion model): the map bends smoothly away from
+    the reference between revisits (issue #40 open). Where the robot came back, the scans agree with slam's map as
+    well as with the reference's (bench ``revisit_consistency``: 0.144 against 0.146 m; a 2-degree bend of the
+    reference, 0.2 m of aligned APE, costs it 0.010 m there): the bend is where no scan sees both passes. Bounds
+    what holds."""
+    estimate, reference = _slam(_log("edmonton"), "edmonton")
+    errors = ape_aligned(Trajectory(estimate.stamps_ns, reference.poses), estimate)
+    assert errors.rmse <= 0.7 and errors.max <= 2.0, (errors.rmse, errors.max)
+    agree = revisit_consistency(_log("edmonton"), {"slam": estimate.poses, "reference": reference.poses},
+                                RADISH_DIR / "edmonton.reference.tum")
+    assert agree["slam"] <= agree["reference"] + 0.002, agree
