@@ -12,7 +12,9 @@ point yet (one point per ``voxel_m`` voxel, the first seen), so later clouds,
 and the robot's next pass, register to what was seen first.
 
 Open3D is imported here only, when a refinement is asked for (it takes about a
-second to load).
+second to load). It runs on one thread: its ICP sums over correspondences on
+oneAPI TBB threads, in an order that changes from run to run, and so did the
+map's last digits; a refinement gives the same map every time.
 
 Poses are 4x4 homogeneous transforms T_frame_sensor (metres), frame the map's.
 """
@@ -52,6 +54,7 @@ class CloudRefiner:
     def __init__(self, voxel_m: float = REFINE_VOXEL_M) -> None:
         import open3d as o3d  # lazily: only a refinement pays for loading Open3D
 
+        o3d.utility.set_max_threads(1)  # TBB's reductions in a fixed order: the same map every run
         self._o3d = o3d
         self.voxel_m = voxel_m
         self._n = 0  # the map: the first _n rows of points, normals and colours (0..1), map frame
