@@ -7,7 +7,10 @@ Each log three ways, one whole ``bagtools slam --no-odometry`` command in its ow
 - every stamp zero, every stamp equal (written by C's ``%.6g``: "1.1e+09") and
   every stamp before the one on the line before (the logs of the collection
   whose stamps cannot be used, as its README names them): the scans are taken
-  in logging order (:class:`bagtools.dataset.ScanClock`).
+  in logging order (:class:`bagtools.dataset.ScanClock`);
+- driven backwards: the same scans in reverse order, each gap kept (the same
+  building on another route: the decisions a log it was not tuned on asks
+  for), scored against the reference reversed.
 
 Rows: the aligned APE (SE(2) alignment, RMSE and max) against the log's corrected
 poses, paired by logging order; baseline in the same run: the front end alone
@@ -53,20 +56,41 @@ def calibration_s() -> float:
                                     text=True).stdout) for _ in range(3))
 
 
-def restamped(log: Path, out: Path, stamp_of) -> Path:
-    """``log`` with its FLASER lines only (and PARAM lines), the k-th stamped ``stamp_of(k)`` (text)."""
-    lines, k = [], 0
+def _laser_lines(log: Path) -> tuple[list[str], list[list[str]]]:
+    """``log``'s PARAM lines, and its FLASER lines split into words, in logging order."""
+    params, lines = [], []
     with gzip.open(log, "rt") as f:
         for line in f:
             words = line.split()
             if words and words[0] == "PARAM":
-                lines.append(line.rstrip("\n"))
+                params.append(line.rstrip("\n"))
             elif words and words[0] == "FLASER":
-                words[-3] = words[-1] = stamp_of(k)
-                lines.append(" ".join(words))
-                k += 1
-    out.write_text("\n".join(lines) + "\n")
+                lines.append(words)
+    return params, lines
+
+
+def restamped(log: Path, out: Path, stamp_of) -> Path:
+    """``log`` with its FLASER lines only (and PARAM lines), the k-th stamped ``stamp_of(k)`` (text)."""
+    params, lines = _laser_lines(log)
+    for k, words in enumerate(lines):
+        words[-3] = words[-1] = stamp_of(k)
+    out.write_text("\n".join(params + [" ".join(words) for words in lines]) + "\n")
     return out
+
+
+def driven_backwards(log: Path, reference: Path, out: Path) -> tuple[Path, Path]:
+    """``log``'s FLASER lines (and PARAM lines) in reverse order, stamped so that each gap is kept, and
+    ``reference`` reversed onto the new stamps: (log, reference) written beside ``out``."""
+    params, lines = _laser_lines(log)
+    end = float(lines[0][-1]) + float(lines[-1][-1])
+    for words in lines:
+        words[-3] = words[-1] = f"{end - float(words[-1]):.6f}"
+    lines.reverse()
+    out.write_text("\n".join(params + [" ".join(words) for words in lines]) + "\n")
+    rows = [line.split() for line in reference.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    backwards = out.with_suffix(".reference.tum")
+    backwards.write_text("".join(" ".join([words[-1], *row[1:]]) + "\n" for words, row in zip(lines, reversed(rows))))
+    return out, backwards
 
 
 def aligned_ape(estimate: Path, reference: Path) -> tuple[float, float]:
@@ -123,7 +147,10 @@ def run(quick: bool) -> list[Row]:
                                                          lambda k: f"{1.1e9 + k:.6g}"),
                        "stamps going backwards": restamped(log, Path(tmp) / f"{name}-back.log",
                                                            lambda k: f"{1.0e6 - k:.6f}")}
+            backwards, backwards_reference = driven_backwards(log, reference, Path(tmp) / f"{name}-backwards.log")
+            sources["driven backwards"] = backwards
             for how, source in sources.items():
+                reference = backwards_reference if how == "driven backwards" else RADISH_DIR / f"{name}.reference.tum"
                 out = Path(tmp) / f"{name}-{how.replace(' ', '_')}"
                 cpu_s, rss_mb, _ = _run(["slam", str(source), "--out", str(out), "--no-odometry", "--no-mcap"])
                 rmse, worst = aligned_ape(out / "trajectory.tum", reference)

@@ -4,12 +4,15 @@
 (odometry, constant velocity, no motion), NDT from them on the keyframe's submap, a correlative search when no guess
 can be trusted, a refinement on finer cells, checks (an ambiguous step's covariance is widened so that a pose graph can
 bend there), keyframes. One objective weighs every candidate: the scan's fit less the motion prior's cost
-(:mod:`bagtools.odometry.prior`). ``docs/commands/ndt-odom.md`` ("How a scan is registered") has each step and the
-settings (:mod:`bagtools.odometry.options`). Poses: planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
+(:mod:`bagtools.odometry.prior`); places that contest it are decided on a finer grid (:mod:`bagtools.odometry.contest`),
+and when the one that came second is close on the objective, by the next scan too: the front end goes on along both
+for a scan and keeps the better pair of steps. ``docs/commands/ndt-odom.md`` ("How a scan is registered") has each step
+and the settings (:mod:`bagtools.odometry.options`). Poses: planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
@@ -21,7 +24,7 @@ from bagtools.odometry.motion import (  # the motion model, shared with the loca
     odometry_sd, steady_velocity_sd,
 )
 from bagtools.odometry.options import (  # the method's fixed settings
-    AGREE_M, AGREE_RAD, AMBIGUOUS_COVARIANCE, AMBIGUOUS_MARGIN, AMBIGUOUS_WARN_SHARE, BASIN_M, BASIN_RAD,
+    AGREE_M, AGREE_RAD, AMBIGUOUS_COVARIANCE, AMBIGUOUS_MARGIN, BASIN_M, BASIN_RAD,
     BEYOND_REACH_GAIN, CONTEST_MARGIN, CONTINUITY_SCORE_RATIO, CV_TURN_PER_M, DEGENERATE_RATIO,
     FINE_SCORE_RESOLUTION_M, FINE_SCORE_WINDOW, MAX_SEARCH_M, MIN_REFINE_CELL_M, MIN_WIDE_POINTS, REFINE_CELL_RATIO,
     REFINE_MAX_M, REFINE_MAX_RAD, SEARCH_SIGMAS, SHORT_STEP_RATIO, SUBMAP_RADIUS_M, WIDE_MAX_PRIOR_COST, WIDE_PEAKS,
@@ -30,6 +33,8 @@ from bagtools.odometry.options import (  # the method's fixed settings
 from bagtools.odometry.prior import (
     CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
 )
+from bagtools.odometry.contest import close_poses, decide
+from bagtools.odometry.report import step_counts, step_warnings
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import COVARIANCE_FLOOR, NdtReference, match_scans
 from bagtools.scan_matching.correlative import CorrelativeReference, match_scans_grid, match_scans_grid_peaks
@@ -72,6 +77,8 @@ class LaserOdometry:
         self._scores: list[float] = []
         self._steps_s: list[float] = []
         self._after_short_step = False
+        self._objectives: deque[float] = deque(maxlen=2)  # the last steps' objectives (score less the prior's cost)
+        self._fork: LaserOdometry | None = None  # the other contender of a contested last step, gone on from there
         fine = self.options.cell_size_m * REFINE_CELL_RATIO
         self._refine_cell_m = fine if self.options.refine and fine >= MIN_REFINE_CELL_M else None
 
@@ -83,13 +90,34 @@ class LaserOdometry:
         odom = None if odom_pose is None else np.asarray(odom_pose, dtype=np.float64)
         sparse = voxel_mean(points_base, self.options.voxel_m)
         if not self.run.steps:
-            step = self._first(stamp_ns, points_base, odom)
-        else:
-            step = self._next(stamp_ns, sparse, points_base, odom)
+            return self._record(self._first(stamp_ns, points_base, odom), odom)
+        fork, self._fork = self._fork, None
+        step = self._record(self._next(stamp_ns, sparse, points_base, odom), odom)
+        if fork is not None:  # the last step was contested: the other contender, judged with this scan too
+            fork._record(fork._next(stamp_ns, sparse, points_base, odom), odom)
+            if sum(fork._objectives) > sum(self._objectives):
+                fork.counts[StepEvent.REVISED] += 1
+                self.__dict__.update(fork.__dict__)
+                return self.run.steps[-1]
+        return step
+
+    def _record(self, step: ScanStep, odom: np.ndarray | None) -> ScanStep:
         self.run.steps.append(step)
         if odom is not None:
             self._last_odom, self._last_odom_pose = odom, step.pose
         return step
+
+    def _clone(self) -> LaserOdometry:
+        """This front end as it stands, to go on along another contender (the steps and the keyframe shared,
+        what a step changes copied)."""
+        clone = copy.copy(self)
+        clone.run = FrontEndRun(list(self.run.steps))
+        clone.counts = Counter(self.counts)
+        clone._keyframe = copy.copy(self._keyframe)
+        clone._recent = deque(self._recent, maxlen=self._recent.maxlen)
+        clone._scores, clone._steps_s, clone._objectives = list(self._scores), list(self._steps_s), deque(self._objectives, 2)
+        clone._fork = None
+        return clone
 
     def _first(self, stamp_ns: int, points: np.ndarray, odom: np.ndarray | None) -> ScanStep:
         pose = odom.copy() if odom is not None else np.zeros(3)
@@ -130,11 +158,24 @@ class LaserOdometry:
             beyond = self._search_beyond_reach(points, kf, _between(kf.pose, last.pose), best)
         self._steps_s.append(dt)
         self._after_short_step = suspect
+        other = None
         if beyond is not None:
             self.counts[StepEvent.BEYOND_REACH] += 1
             best, ambiguous = beyond, False
         else:
-            best, ambiguous = self._decide(full, kf, matches, best, prior)
+            best, ambiguous, other = self._decide(full, kf, matches, best, prior)
+        if other is not None and prior.objective(best) - prior.objective(other) < CONTEST_MARGIN:
+            # a contest on the objective itself: the other contender goes on too, and the next scan decides
+            self._fork = self._clone()
+            self._fork._record(self._fork._commit(stamp_ns, full, kf, last, dt, prior, guesses, other, ambiguous,
+                                                  None), odom)
+        return self._commit(stamp_ns, full, kf, last, dt, prior, guesses, best, ambiguous, beyond)
+
+    def _commit(self, stamp_ns: int, full: np.ndarray, kf: _Keyframe, last: ScanStep, dt: float, prior: MotionPrior,
+                guesses: dict[str, np.ndarray], best: Match, ambiguous: bool, beyond: Match | None) -> ScanStep:
+        """The step to ``best``: refined, checked, the motion model and the keyframe updated."""
+        opts = self.options
+        self._objectives.append(prior.objective(best))
         if ambiguous:
             self.counts[StepEvent.AMBIGUOUS] += 1
         if best.score < opts.min_score:
@@ -195,7 +236,7 @@ class LaserOdometry:
         matches: list[Match] = []
         for guess in guesses.values():
             initial = _between(kf.pose, guess)
-            if any(_close(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
+            if any(close_poses(initial, m.pose, BASIN_M, BASIN_RAD) for m in matches):
                 continue
             matches.append(self._ndt(points, kf.ndt, initial, "ndt", prior))
         return matches
@@ -226,35 +267,11 @@ class LaserOdometry:
                       wide=kinematic, outlier_cost=OUTLIER_COST, kind="odometry")
 
     def _decide(self, points: np.ndarray, kf: _Keyframe, matches: list[Match], best: Match,
-                prior: MotionPrior) -> tuple[Match, bool]:
-        """(the winner, whether the step is ambiguous): ``best``, unless a match in another place is within
-        CONTEST_MARGIN of it; then the finer grid's score less the cost under the robot's reach (the prior's wide
-        part) decides between them
-        (``points``: the whole scan), when it tells them apart by AMBIGUOUS_MARGIN; when it does not either,
-        ``best`` stays and the step is ambiguous."""
-        rivals = [m for m in matches if not _close(m.pose, best.pose, BASIN_M, BASIN_RAD)]
-        if not rivals:
-            return best, False
+                prior: MotionPrior) -> tuple[Match, bool, Match | None]:
+        """:func:`~bagtools.odometry.contest.decide` on the keyframe's fine field (``points``: the whole scan)."""
         # far-apart scans without odometry: the shortlist's score cannot rank places (with odometry, its prior does)
         margin = math.inf if prior.kind != "odometry" and self._turn_starts() else CONTEST_MARGIN
-        runner_up = max(prior.objective(m) for m in rivals)
-        if prior.objective(best) - runner_up >= margin:
-            return best, False
-        contenders = [best]
-        for m in sorted(rivals, key=prior.objective, reverse=True):
-            if prior.objective(best) - prior.objective(m) < margin and \
-                    not any(_close(m.pose, c.pose, BASIN_M, BASIN_RAD) for c in contenders):
-                contenders.append(m)
-        reach = prior.wide or prior  # what the robot can have done; the prior's preference shortlisted them
-        fine = [self._fine_score(points, kf, m.pose) - reach.weight * reach.cost(m.pose) for m in contenders]
-        order = np.argsort(fine)[::-1]
-        if fine[order[0]] - fine[order[1]] < AMBIGUOUS_MARGIN:  # the finer grid cannot tell them apart either
-            return best, True
-        winner = contenders[order[0]]
-        if winner is best:
-            return best, False
-        # the whole scan's fine field vouches for it, where its voxel-filtered score may not (far returns on new walls)
-        return Match(winner.pose, max(winner.score, fine[order[0]]), winner.covariance, winner.source), False
+        return decide(matches, best, prior, margin, lambda pose: self._fine_score(points, kf, pose))
 
     def _fine_score(self, points: np.ndarray, kf: _Keyframe, pose: np.ndarray) -> float:
         """The best likelihood-field score (in [0, 1]) of ``points`` on the keyframe's submap at
@@ -272,7 +289,7 @@ class LaserOdometry:
                 or best.score < self._trust_score() or prior.mahalanobis2(best.pose) > PRIOR_GATE2):
             return True
         rivals = [m for m in matches if m is not best and m.score > 0.8 * best.score]
-        return any(not _close(m.pose, best.pose, AGREE_M, AGREE_RAD) for m in rivals)
+        return any(not close_poses(m.pose, best.pose, AGREE_M, AGREE_RAD) for m in rivals)
 
     def _trust_score(self, ratio: float | None = None) -> float:
         """A score to trust: a share (``ratio``, default ``trust_score_ratio``) of the recent typical score (the
@@ -321,7 +338,7 @@ class LaserOdometry:
                    for k in range(-n_turns, n_turns + 1) if k != 0]  # k = 0: the guesses' NDT is in matches
         refined: list[Match] = []
         for initial, source in starts:
-            if any(_close(initial, m.pose, AGREE_M, AGREE_RAD) for m in refined):
+            if any(close_poses(initial, m.pose, AGREE_M, AGREE_RAD) for m in refined):
                 continue
             if prior.weight * prior.cost(initial) > WIDE_MAX_PRIOR_COST:  # the prior rules it out whatever it scores
                 continue
@@ -402,7 +419,7 @@ class LaserOdometry:
             kf.fine = NdtReference.from_points(kf.points, self._refine_cell_m, self.options.cell_model)
         result = match_scans(points, kf.fine, initial_pose=best.pose, max_iterations=self.options.max_iterations)
         pose = np.asarray(result.pose, dtype=np.float64)
-        if result.score <= 0 or not _close(best.pose, pose, REFINE_MAX_M, REFINE_MAX_RAD):
+        if result.score <= 0 or not close_poses(best.pose, pose, REFINE_MAX_M, REFINE_MAX_RAD):
             return best
         pose[:2] = best.pose[:2] + _constrained(pose[:2] - best.pose[:2], np.asarray(result.hessian)[:2, :2])
         return Match(pose, best.score, best.covariance, best.source)
@@ -452,36 +469,14 @@ class LaserOdometry:
             parts.append(older.points_base @ np.array([[c, s], [-s, c]]) + rel[:2])
         return np.concatenate(parts) if len(parts) > 1 else points
 
-    # -- reporting -----------------------------------------------------------------------------
+    # -- reporting (:mod:`bagtools.odometry.report`) ---------------------------------------------
 
     def warnings(self, topic: str = "the scans") -> list[str]:
         """One line per kind of trouble, with counts (nothing when all went well)."""
-        pairs = max(len(self.run.steps) - 1, 0)
-        out = []
-        if self.counts[StepEvent.FALLBACK] and self.counts[StepEvent.FALLBACK] >= max(1, 0.02 * pairs):
-            out.append(f"{self.counts[StepEvent.FALLBACK]} of {pairs} scan pairs on {topic} could not be matched (score below "
-                       f"{self.options.min_score:g}) and kept their guess: the trajectory is less reliable there")
-        if self.counts[StepEvent.ODOM_REJECTED]:
-            out.append(f"{self.counts[StepEvent.ODOM_REJECTED]} odometry step(s) contradicted by the scan match beyond the "
-                       "odometry's noise (corrupt or slipping samples) were not followed")
-        if self.counts[StepEvent.AMBIGUOUS] >= max(3, AMBIGUOUS_WARN_SHARE * pairs):
-            out.append(f"{self.counts[StepEvent.AMBIGUOUS]} of {pairs} scan pairs on {topic} matched two places almost equally "
-                       "well (a repeating scene, or scans that overlap too little): the trajectory may be wrong there; "
-                       "wheel odometry or scans closer together would settle it")
-        if self.counts[StepEvent.BEYOND_REACH]:
-            out.append(f"{self.counts[StepEvent.BEYOND_REACH]} scan(s) on {topic} matched only beyond what the robot can do in "
-                       "their time step (a wrong stamp, or the robot carried) and were placed there")
-        if self.counts[StepEvent.TOO_FAST]:
-            out.append(f"{self.counts[StepEvent.TOO_FAST]} step(s) faster than {2 * self.options.max_speed_mps:g} m/s, more than "
-                       "the robot can move: check the scans there")
-        return out
+        return step_warnings(self.counts, len(self.run.steps), self.options, topic)
 
     def summary_counts(self) -> dict[str, int]:
-        pairs = max(len(self.run.steps) - 1, 0)
-        return {"pairs": pairs, "searched": self.counts[StepEvent.SEARCHED], "fallbacks": self.counts[StepEvent.FALLBACK],
-                "odometry_rejected": self.counts[StepEvent.ODOM_REJECTED], "faster_than_robot": self.counts[StepEvent.TOO_FAST],
-                "ambiguous": self.counts[StepEvent.AMBIGUOUS], "beyond_reach": self.counts[StepEvent.BEYOND_REACH],
-                "keyframes": len(self.run.keyframe_indexes)}
+        return step_counts(self.counts, len(self.run.steps), len(self.run.keyframe_indexes))
 
 
 def _constrained(move: np.ndarray, hessian: np.ndarray) -> np.ndarray:
@@ -493,7 +488,3 @@ def _constrained(move: np.ndarray, hessian: np.ndarray) -> np.ndarray:
     weak = vectors[:, 0]
     return move - weak * float(weak @ move) if values[0] < DEGENERATE_RATIO * values[1] else move
 
-
-def _close(a: np.ndarray, b: np.ndarray, tol_m: float, tol_rad: float) -> bool:
-    d = _between(a, b)
-    return bool(np.hypot(d[0], d[1]) <= tol_m and abs(d[2]) <= tol_rad)

@@ -188,6 +188,7 @@ class StepEvent(StrEnum):
     TOO_FAST = "faster_than_robot"
     AMBIGUOUS = "ambiguous"
     BEYOND_REACH = "beyond_reach"
+    REVISED = "revised_by_the_next_scan"
 
 
 #: A step is ambiguous when another place scores within this much of the chosen one (normalized score less the

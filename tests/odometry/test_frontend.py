@@ -321,3 +321,35 @@ def test_scans_seconds_apart_are_not_searched_widely_at_every_step(lap, monkeypa
     err = step_errors(front.run.poses(), truth[keep])
     assert np.hypot(err[:, 0], err[:, 1]).max() < 0.03 and np.abs(err[:, 2]).max() < np.radians(1.0)
     assert len(wide) <= 0.25 * (len(keep) - 1), (len(wide), len(keep))
+
+
+@pytest.mark.parametrize("look_ahead", [True, False])
+def test_a_contested_step_is_decided_by_the_next_scan(lap, monkeypatch, look_ahead: bool) -> None:
+    """One step's contest is rigged: a place 0.4 m aside wins it, the true one comes second. The other contender
+    goes on too; the next scan fits on from the true place better, so that branch is kept, counted, and every step
+    is right. Without the look-ahead (no contest is close enough to fork) the wrong step stays."""
+    import bagtools.odometry.frontend as frontend
+    from bagtools.odometry.prior import Match
+
+    if not look_ahead:
+        monkeypatch.setattr(frontend, "CONTEST_MARGIN", -1.0)
+    steps, truth = lap
+    keep = np.arange(0, len(steps), 5)
+    real, rigged_at = LaserOdometry._decide, 6
+
+    def rigged(self, points, kf, matches, best, prior):
+        winner, ambiguous, other = real(self, points, kf, matches, best, prior)
+        if len(self.run.steps) == rigged_at and self._fork is None and not getattr(self, "_rigged", False):
+            self._rigged = True
+            wrong = Match(winner.pose + np.array([0.0, 0.4, 0.0]), winner.score, winner.covariance, "search")
+            return wrong, False, winner
+        return winner, ambiguous, other
+
+    monkeypatch.setattr(LaserOdometry, "_decide", rigged)
+    front = register(steps, truth, keep)
+    err = step_errors(front.run.poses(), truth[keep])
+    worst = np.hypot(err[:, 0], err[:, 1]).max()
+    if look_ahead:
+        assert front.summary_counts()["revised_by_the_next_scan"] >= 1 and worst < 0.03, (front.counts, worst)
+    else:
+        assert front.counts["revised_by_the_next_scan"] == 0 and worst > 0.3, worst

@@ -16,7 +16,7 @@ import pytest
 from bagtools.commands.slam import SlamOptions, SlamPipeline
 from bagtools.trajectory.evaluate import ape_aligned
 from bagtools.trajectory import Trajectory, read_tum
-from bench.bench_slam_unseen import restamped, revisit_consistency
+from bench.bench_slam_unseen import driven_backwards, restamped, revisit_consistency
 from tests.conftest import REPO
 
 RADISH_DIR = REPO.parent / "shared" / "data" / "radish"
@@ -68,9 +68,22 @@ def test_steady_stamps_give_the_same_map(tmp_path: Path) -> None:
     assert rmse <= 0.2 and worst <= 0.75, (rmse, worst)
 
 
+def test_a_corridor_loop_driven_backwards(tmp_path: Path) -> None:
+    """Seattle's scans in reverse order, each gap kept: the same corridors on another route. A scan at a crossing
+    fits turned by 90 degrees, and a corridor's doors repeat a metre apart; the step that chose the look-alike was
+    kept until the next scan judged both contenders (6.9 m RMSE before, 0.064 m with it)."""
+    source, reference = driven_backwards(_log("seattle"), RADISH_DIR / "seattle.reference.tum",
+                                         tmp_path / "seattle-backwards.log")
+    result = SlamPipeline(source, SlamOptions(use_odometry=False)).run()
+    backwards = read_tum(reference)
+    errors = ape_aligned(Trajectory(result.trajectory.stamps_ns, backwards.poses), result.trajectory)
+    assert errors.rmse <= 0.2 and errors.max <= 0.75, (errors.rmse, errors.max)
+    assert result.summary["front_end"]["revised_by_the_next_scan"] >= 1, result.summary["front_end"]
+
+
 def test_a_large_hall_is_not_yet_to_target() -> None:
     """Edmonton: a convention centre with few revisits (63 of 340 scans lie within 2 m of an earlier pass). Its
-    laser sees to 51 m (a PARAM said 10 m, and scans held a dozen returns). 0.35-0.60 m as distributed, 0.40-0.45 m
+    laser sees to 51 m (a PARAM said 10 m, and scans held a dozen returns). 0.35-0.60 m as distributed, 0.40-0.50 m
     with steady stamps, over the sessions (5.1 and 7.8 m before the motion model): the map bends smoothly away from
     the reference between revisits (issue #40 open). Where the robot came back, the scans agree with slam's map as
     well as with the reference's (bench ``revisit_consistency``: 0.144 against 0.146 m; a 2-degree bend of the
