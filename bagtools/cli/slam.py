@@ -78,13 +78,15 @@ def slam(bag: str, out_dir: str, topic: str, cell_size: float | None, cells_per_
     loops = s["loop_closure"]
     reasons = ", ".join(f"{n} {why}" for why, n in loops["rejected_by_reason"].items())
     uncertain = s["front_end"].get("ambiguous", 0)
+    revised = s["front_end"].get("revised_by_the_next_scan", 0)  # contested steps the next scan decided otherwise
     taken = s["graph"].get(TAKEN_BY_GRAPH, 0)  # matches no second one confirmed, taken by the graph's GNC
     click.echo(f"{s['scans']} scans, {s['keyframes']} keyframes; {loops['candidates']} loop candidates: "
                f"{loops['accepted']} accepted{f' ({taken} unconfirmed, taken by the graph)' if taken else ''}, "
                f"{loops['rejected']} rejected{f' ({reasons})' if reasons else ''}; "
                f"optimized in {s['optimization']['time_s']:.2f} s; {s['timing_s']['total']:.1f} s in all"
                + (f"; {uncertain} front-end step(s) left uncertain (another place matched almost as well)"
-                  if uncertain else ""))
+                  if uncertain else "")
+               + (f"; {revised} contested step(s) changed by the scan after them" if revised else ""))
     click.echo(f"wrote {', '.join(p.name for p in written)} in {out_dir}")
     for name, label in (("errors_slam", "SLAM"), ("errors_front_end", "laser odometry")):
         errors = s.get(name)

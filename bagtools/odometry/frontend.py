@@ -85,7 +85,9 @@ class LaserOdometry:
     # -- the loop body -------------------------------------------------------------------------
 
     def register(self, stamp_ns: int, points_base: np.ndarray, odom_pose: np.ndarray | None = None) -> ScanStep:
-        """Add one scan: (N,2) valid returns in the base frame, and the odometry pose at its stamp if known."""
+        """Add one scan: (N,2) valid returns in the base frame, and the odometry pose at its stamp if known. When the
+        last step was contested, the scan is registered along both contenders and the better pair of steps kept: the
+        step returned before may have been replaced (``run.steps`` holds the kept ones)."""
         points_base = np.asarray(points_base, dtype=np.float64)
         odom = None if odom_pose is None else np.asarray(odom_pose, dtype=np.float64)
         sparse = voxel_mean(points_base, self.options.voxel_m)

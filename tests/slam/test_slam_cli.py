@@ -117,7 +117,8 @@ def test_a_bad_relations_file_is_refused_before_the_work(tmp_path: Path) -> None
 
 def test_uncertain_front_end_steps_are_said_on_the_summary_line(tmp_path: Path, monkeypatch) -> None:
     """Loops rejected are counted by reason on the summary line; steps the front end left uncertain (ambiguous:
-    another place matched almost as well) are said there too, not only past a 3 % warning threshold."""
+    another place matched almost as well) are said there too, not only past a 3 % warning threshold, and so are
+    contested steps the scan after them decided otherwise."""
     from bagtools.commands.slam import SlamPipeline
 
     run = SlamPipeline.run
@@ -125,9 +126,11 @@ def test_uncertain_front_end_steps_are_said_on_the_summary_line(tmp_path: Path, 
     def with_uncertain(self):
         result = run(self)
         result.summary["front_end"]["ambiguous"] = 2
+        result.summary["front_end"]["revised_by_the_next_scan"] = 3
         return result
 
     monkeypatch.setattr(SlamPipeline, "run", with_uncertain)
     done = _run("slam", str(FIXTURES / "sim_random_nocloud_20s"), "--out", str(tmp_path / "slam"), "--no-mcap")
     assert done.returncode == 0, done.stderr
-    assert "; 2 front-end step(s) left uncertain (another place matched almost as well)" in done.stdout
+    assert ("; 2 front-end step(s) left uncertain (another place matched almost as well); 3 contested step(s) "
+            "changed by the scan after them") in done.stdout
