@@ -7,7 +7,8 @@ bend there), keyframes. One objective weighs every candidate: the scan's fit les
 (:mod:`bagtools.odometry.prior`); places that contest it are decided on a finer grid (:mod:`bagtools.odometry.contest`),
 and when the one that came second is close on the objective, by the next scan too: the front end goes on along both
 for a scan and keeps the better pair of steps. ``docs/commands/ndt-odom.md`` ("How a scan is registered") has each step
-and the settings (:mod:`bagtools.odometry.options`). Poses: planar [x, y, theta] (m, m, rad) of the base in the odometry frame.
+and the settings (:mod:`bagtools.odometry.options`). Poses: planar [x, y, theta] (m, m, rad) of the base in the
+odometry frame.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bagtools.odometry.contest import close_poses, decide
 from bagtools.odometry.motion import (  # the motion model, shared with the localizer
     CV_NOISE_M, CV_NOISE_RAD, CV_NOISE_RATIO, MOTION_MEMORY_S, STAMP_JITTER_S, VELOCITY_SPAN_S,
     odometry_sd, steady_velocity_sd,
@@ -33,7 +35,6 @@ from bagtools.odometry.options import (  # the method's fixed settings
 from bagtools.odometry.prior import (
     CV_OUTLIER_COST, OUTLIER_COST, PRIOR_GATE2, Match, MotionPrior, ndt_covariance,
 )
-from bagtools.odometry.contest import close_poses, decide
 from bagtools.odometry.report import step_counts, step_warnings
 from bagtools.odometry.steps import FrontEndRun, ScanStep
 from bagtools.scan_matching import COVARIANCE_FLOOR, NdtReference, match_scans
@@ -117,7 +118,8 @@ class LaserOdometry:
         clone.counts = Counter(self.counts)
         clone._keyframe = copy.copy(self._keyframe)
         clone._recent = deque(self._recent, maxlen=self._recent.maxlen)
-        clone._scores, clone._steps_s, clone._objectives = list(self._scores), list(self._steps_s), deque(self._objectives, 2)
+        clone._scores, clone._steps_s = list(self._scores), list(self._steps_s)
+        clone._objectives = deque(self._objectives, maxlen=self._objectives.maxlen)
         clone._fork = None
         return clone
 
