@@ -124,8 +124,8 @@ def revisit_consistency(log: Path, poses: dict[str, np.ndarray], reference: Path
             out[name] = float("nan")
             continue
         placed = [p @ T[k, :2, :2].T + T[k, :2, 3] for k, p in enumerate(scans)]
-        out[name] = float(np.mean([np.minimum(cKDTree(placed[i]).query(placed[j])[0], CLIP_M).mean()
-                                   for i, j in pairs]))
+        trees = {i: cKDTree(placed[i]) for i in np.unique(pairs[:, 0]).tolist()}  # one tree per scan, not per pair
+        out[name] = float(np.mean([np.minimum(trees[i].query(placed[j])[0], CLIP_M).mean() for i, j in pairs]))
     return out
 
 
